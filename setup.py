@@ -1,0 +1,49 @@
+"""ament_python package stockpile_ros; also a plain pip-installable Python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'stockpile_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['tests', 'tests.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/launch', glob('launch/*.py')),
+        (f'share/{PACKAGE}/config', glob('config/*')),
+        # The message schemas travel with the Python package so that bag replay can register them
+        # with the rosbags typestore on machines that never built the interface package.
+        (f'share/{PACKAGE}/msg_schemas/msg', glob('msg_schemas/msg/*.msg')),
+    ],
+    python_requires='>=3.10',
+    install_requires=[
+        'numpy>=1.26',
+        'scipy>=1.11',
+        'opencv-python-headless>=4.8,<5',
+        'open3d-cpu>=0.19; platform_machine=="x86_64"',
+        'open3d>=0.19; platform_machine!="x86_64"',
+        'pycolmap>=3.11',
+        'rosbags>=0.10',
+        'tqdm>=4.60',
+        'matplotlib>=3.7',
+        'PyYAML>=6',
+    ],
+    extras_require={
+        'test': ['pytest>=7', 'ruff>=0.5', 'mypy>=1.10', 'types-PyYAML'],
+    },
+    zip_safe=True,
+    maintainer='stockpile_ros maintainers',
+    maintainer_email='maintainers@stockpile-ros.invalid',
+    description='Measure the rocks of a stockpile from a moving camera (ROS 2 Jazzy).',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'stockpile = stockpile_ros.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,48 @@
+"""Errors that carry a message meant for the user, never a bare traceback."""
+
+from __future__ import annotations
+
+__all__ = ['BagError', 'CaptureError', 'StockpileError']
+
+
+class StockpileError(Exception):
+    """Base of every error the command line reports as a message rather than a traceback."""
+
+
+class BagError(StockpileError):
+    """A bag, or one message in it, that cannot be used.
+
+    Args:
+        bag: Path of the bag.
+        what: What is wrong, in words.
+        topic: Topic of the offending message, if any.
+        index: Index of the message within its topic (0-based), if any.
+    """
+
+    def __init__(self, bag: str, what: str, topic: str | None = None, index: int | None = None):
+        self.bag = bag
+        self.what = what
+        self.topic = topic
+        self.index = index
+        where = bag
+        if topic is not None:
+            where += f', topic {topic}'
+        if index is not None:
+            where += f', message {index}'
+        super().__init__(f'{where}: {what}')
+
+
+class CaptureError(StockpileError):
+    """The capture was not good enough for a stage to succeed.
+
+    Args:
+        stage: The stage that failed, e.g. ``"sfm"``.
+        reason: What went wrong, measured.
+        advice: What the operator should do about it.
+    """
+
+    def __init__(self, stage: str, reason: str, advice: str):
+        self.stage = stage
+        self.reason = reason
+        self.advice = advice
+        super().__init__(f'{stage}: {reason}. {advice}')
