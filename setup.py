@@ -15,6 +15,7 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/launch', glob('launch/*.py')),
         (f'share/{PACKAGE}/config', glob('config/*')),
+        (f'share/{PACKAGE}/dashboards', glob('dashboards/*')),
         # The message schemas travel with the Python package so that bag replay can register them
         # with the rosbags typestore on machines that never built the interface package.
         (f'share/{PACKAGE}/msg_schemas/msg', glob('msg_schemas/msg/*.msg')),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -21,6 +22,7 @@ class CameraModel:
         d: Distortion coefficients (may be empty).
         distortion_model: ``"plumb_bob"``, ``"rational_polynomial"``, ``"equidistant"`` or ``""``.
         frame_id: Optical frame of the camera (REP 103: z forward, x right, y down).
+
     """
 
     width: int
@@ -51,7 +53,7 @@ class CameraModel:
         return float(self.k[1, 2])
 
     @classmethod
-    def from_fov(cls, width: int, height: int, hfov_deg: float, **kwargs: str) -> CameraModel:
+    def from_fov(cls, width: int, height: int, hfov_deg: float, **kwargs: Any) -> CameraModel:
         """Build a distortion-free camera from its horizontal field of view."""
         f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2)
         k = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
@@ -69,6 +71,7 @@ class Frame:
         camera: The matching camera model, None when the bag has no CameraInfo for it.
         topic: Topic the frame came from.
         index: Index of the message within its topic.
+
     """
 
     stamp_ns: int

@@ -17,6 +17,7 @@ class BagError(StockpileError):
         what: What is wrong, in words.
         topic: Topic of the offending message, if any.
         index: Index of the message within its topic (0-based), if any.
+
     """
 
     def __init__(self, bag: str, what: str, topic: str | None = None, index: int | None = None):
@@ -39,6 +40,7 @@ class CaptureError(StockpileError):
         stage: The stage that failed, e.g. ``"sfm"``.
         reason: What went wrong, measured.
         advice: What the operator should do about it.
+
     """
 
     def __init__(self, stage: str, reason: str, advice: str):

@@ -24,6 +24,7 @@ class LabelledMesh:
         faces: Mx3 int64 vertex indices.
         labels: M int32 face labels (rock id, 0 = ground or unassigned).
         colors: Nx3 uint8 vertex colours, or None.
+
     """
 
     vertices: npt.NDArray[np.float64]
@@ -43,7 +44,11 @@ def write_labelled_mesh(path: str | Path, mesh: LabelledMesh) -> None:
     if mesh.colors is not None:
         lines += ['property uchar red', 'property uchar green', 'property uchar blue']
         vdesc += [('red', 'u1'), ('green', 'u1'), ('blue', 'u1')]
-    lines += [f'element face {nf}', 'property list uchar int vertex_indices', 'property int rock_id']
+    lines += [
+        f'element face {nf}',
+        'property list uchar int vertex_indices',
+        'property int rock_id',
+    ]
     lines.append('end_header')
     verts = np.empty(nv, dtype=vdesc)
     for i, axis in enumerate('xyz'):
@@ -75,6 +80,7 @@ def read_labelled_mesh(path: str | Path) -> LabelledMesh:
 
     Raises:
         ValueError: The file is not a binary little-endian triangle PLY.
+
     """
     raw = Path(path).read_bytes()
     end = raw.find(b'end_header\n')

@@ -1,8 +1,8 @@
 """Builders of ROS messages, written once for rosbags and rclpy.
 
 rosbags message classes and rclpy message classes share field names; they differ in how they want
-primitive arrays. A :class:`MessageFactory` hides that difference, so every builder here serves the bag
-writer and the live nodes alike. The rosbags factory lives here; the rclpy one in
+primitive arrays. A :class:`MessageFactory` hides that difference, so every builder here serves the
+bag writer and the live nodes alike. The rosbags factory lives here; the rclpy one in
 :mod:`stockpile_ros.nodes`.
 """
 
@@ -105,7 +105,7 @@ def compressed_image(
     fmt: str = 'jpeg',
     quality: int = 90,
 ) -> Any:
-    """Build ``sensor_msgs/CompressedImage`` (``jpeg`` or ``png``) from an RGB or mono uint8 array."""
+    """Build ``sensor_msgs/CompressedImage`` (``jpeg`` or ``png``) from RGB or mono uint8."""
     bgr = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
     if fmt == 'jpeg':
         ok, buf = cv2.imencode('.jpg', bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
@@ -172,7 +172,9 @@ def odometry(
         pose=f.cls('geometry_msgs/msg/PoseWithCovariance')(
             pose=pose(f, position, quat_xyzw), covariance=f.f64(cov)
         ),
-        twist=f.cls('geometry_msgs/msg/TwistWithCovariance')(twist=twist, covariance=f.f64(cov * 0)),
+        twist=f.cls('geometry_msgs/msg/TwistWithCovariance')(
+            twist=twist, covariance=f.f64(cov * 0)
+        ),
     )
 
 

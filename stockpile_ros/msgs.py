@@ -1,7 +1,7 @@
 """Our message types (``msg_schemas/msg/*.msg``) registered with the rosbags typestore.
 
-The same ``.msg`` files build the ``stockpile_msgs`` interface package on the cart; here they are parsed
-by rosbags so that bags holding our types can be written and read without ROS.
+The same ``.msg`` files build the ``stockpile_msgs`` interface package on the cart; here they are
+parsed by rosbags so that bags holding our types can be written and read without ROS.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ def find_msg_dir() -> Path:
 
     Raises:
         FileNotFoundError: No candidate folder holds ``Rock.msg``.
+
     """
     candidates = _candidate_dirs()
     for path in candidates:
@@ -56,6 +57,7 @@ def register_types(store: Typestore, msg_dir: Path | None = None) -> None:
     Args:
         store: The typestore to extend.
         msg_dir: Folder of ``.msg`` files; found with :func:`find_msg_dir` when None.
+
     """
     folder = msg_dir or find_msg_dir()
     types = {}

@@ -13,8 +13,10 @@ __all__ = ['progress']
 T = TypeVar('T')
 
 
-def progress(items: Iterable[T], desc: str, total: int | None = None, unit: str = 'it') -> Iterator[T]:
-    """Iterate over ``items`` with a progress bar on stderr, shown only when stderr is a terminal."""
+def progress(
+    items: Iterable[T], desc: str, total: int | None = None, unit: str = 'it'
+) -> Iterator[T]:
+    """Iterate over ``items`` with a progress bar on stderr (shown only on a terminal)."""
     yield from tqdm(
         items, desc=desc, total=total, unit=unit, disable=not sys.stderr.isatty(), leave=False
     )

@@ -19,8 +19,8 @@ __all__ = ['BagWriter']
 class BagWriter:
     """An MCAP bag writer that adds one connection per topic on first use.
 
-    Message definitions are embedded in the MCAP file, so any rosbags reader decodes our types without
-    being handed the ``.msg`` files.
+    Message definitions are embedded in the MCAP file, so any rosbags reader decodes our types
+    without being handed the ``.msg`` files.
 
     Example:
         >>> with BagWriter(path) as bag:  # doctest: +SKIP
@@ -29,6 +29,7 @@ class BagWriter:
     Args:
         path: Bag folder to create; must not exist.
         store: Typestore to serialise with; the Jazzy store with our types by default.
+
     """
 
     def __init__(self, path: str | Path, store: Typestore | None = None):
@@ -51,7 +52,7 @@ class BagWriter:
         self._writer.close()
 
     def write(self, topic: str, msg: Any, stamp_ns: int) -> None:
-        """Serialise ``msg`` (a rosbags message object) and write it on ``topic`` at ``stamp_ns``."""
+        """Serialise ``msg`` (a rosbags message) and write it on ``topic`` at ``stamp_ns``."""
         msgtype: str = msg.__msgtype__
         conn = self._connections.get(topic)
         if conn is None:

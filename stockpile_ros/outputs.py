@@ -1,0 +1,539 @@
+"""Builders of every message the project publishes, for rosbags and rclpy alike.
+
+Standard types: ``sensor_msgs/PointCloud2`` (x, y, z, rgb, label),
+``visualization_msgs/MarkerArray`` (one coloured shape and one size label per rock) and
+``diagnostic_msgs/DiagnosticArray``. Our types
+(``stockpile_msgs``) are built from the ``report.json`` dictionaries of ``docs/formats.md``: JSON
+``null`` becomes NaN in float fields.
+
+Each builder takes a :class:`~stockpile_ros.messages.MessageFactory` first, as in
+:mod:`stockpile_ros.messages`.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .messages import MessageFactory, header, pose
+
+__all__ = [
+    'DIAGNOSTIC_LEVELS',
+    'PIPELINE_STATES',
+    'diagnostic_array',
+    'gradation_msg',
+    'marker_array',
+    'pipeline_status',
+    'pointcloud2',
+    'pointcloud2_arrays',
+    'rock_array',
+    'rock_color',
+    'rock_msg',
+]
+
+DIAGNOSTIC_LEVELS = ('OK', 'WARN', 'ERROR', 'STALE')
+"""``diagnostic_msgs/DiagnosticStatus`` levels, in the order of their values 0..3."""
+
+PIPELINE_STATES = ('IDLE', 'COLLECTING', 'RECONSTRUCTING', 'SEGMENTING', 'DONE', 'FAILED')
+"""``stockpile_msgs/PipelineStatus`` states, in the order of their values 0..5."""
+
+# PointField datatype -> numpy type (sensor_msgs/PointField constants 1..8).
+_FIELD_DTYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
+_FLOAT32 = 7
+_UINT32 = 6
+
+_IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
+
+
+def _nan(value: Any) -> float:
+    """JSON number or null -> float (NaN for null)."""
+    return math.nan if value is None else float(value)
+
+
+def _get(d: Mapping[str, Any], key: str, what: str) -> Any:
+    try:
+        return d[key]
+    except KeyError:
+        raise ValueError(f'{what} has no {key!r} (keys: {", ".join(sorted(d))})') from None
+
+
+def pointcloud2(
+    f: MessageFactory,
+    points: npt.ArrayLike,
+    colors: npt.ArrayLike | None,
+    labels: npt.ArrayLike | None,
+    stamp_ns: int,
+    frame_id: str,
+) -> Any:
+    """Build an unordered ``sensor_msgs/PointCloud2`` (height 1, little-endian).
+
+    Fields: ``x``, ``y``, ``z`` (FLOAT32); with colours ``rgb`` (FLOAT32 holding the bits of the
+    uint32 ``0x00RRGGBB``, as PCL and RViz expect); with labels ``label`` (UINT32, the rock id,
+    0 = ground or unassigned).
+
+    Args:
+        f: Message factory.
+        points: Nx3 positions [m].
+        colors: Nx3 uint8 RGB, or None.
+        labels: N non-negative integer labels, or None.
+        stamp_ns: Header stamp [ns].
+        frame_id: Header frame.
+
+    Raises:
+        ValueError: Shapes disagree, colours are not 0..255 integers, or a label is negative.
+
+    """
+    xyz = np.asarray(points, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise ValueError(f'points must be Nx3, got shape {xyz.shape}')
+    n = xyz.shape[0]
+    names = ['x', 'y', 'z']
+    formats = ['<f4', '<f4', '<f4']
+    if colors is not None:
+        names.append('rgb')
+        formats.append('<u4')
+    if labels is not None:
+        names.append('label')
+        formats.append('<u4')
+    record = np.zeros(n, dtype=np.dtype({'names': names, 'formats': formats}))
+    record['x'], record['y'], record['z'] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    if colors is not None:
+        rgb = np.asarray(colors)
+        if rgb.shape != (n, 3):
+            raise ValueError(f'colors must be {n}x3, got shape {rgb.shape}')
+        if not np.issubdtype(rgb.dtype, np.integer) or (
+            rgb.size and (rgb.min() < 0 or rgb.max() > 255)
+        ):
+            raise ValueError(f'colors must be integers 0..255 (uint8 RGB), got {rgb.dtype}')
+        rgb = rgb.astype(np.uint32)
+        record['rgb'] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    if labels is not None:
+        lab = np.asarray(labels).reshape(-1)
+        if lab.shape != (n,):
+            raise ValueError(f'labels must have {n} values, got {lab.shape[0]}')
+        if lab.size and lab.min() < 0:
+            raise ValueError('labels must be non-negative (0 = ground or unassigned)')
+        record['label'] = lab.astype(np.uint32)
+    field_cls = f.cls('sensor_msgs/msg/PointField')
+    # Every field is 4 bytes, packed in order.
+    offsets = {name: 4 * i for i, name in enumerate(names)}
+    fields = [
+        field_cls(
+            name=name,
+            offset=offsets[name],
+            datatype=_UINT32 if name == 'label' else _FLOAT32,
+            count=1,
+        )
+        for name in names
+    ]
+    return f.cls('sensor_msgs/msg/PointCloud2')(
+        header=header(f, stamp_ns, frame_id),
+        height=1,
+        width=n,
+        fields=fields,
+        is_bigendian=False,
+        point_step=record.dtype.itemsize,
+        row_step=record.dtype.itemsize * n,
+        data=f.u8(record.view(np.uint8)),
+        is_dense=bool(np.all(np.isfinite(xyz))),
+    )
+
+
+def pointcloud2_arrays(
+    msg: Any,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8] | None, npt.NDArray[np.int64] | None]:
+    """Read points, colours and labels back from a ``sensor_msgs/PointCloud2``.
+
+    Returns:
+        Nx3 float32 points, Nx3 uint8 RGB colours (None without an ``rgb`` field), N labels (None
+        without a ``label`` field).
+
+    Raises:
+        ValueError: No x/y/z fields, an unknown field type, or data shorter than the header says.
+
+    """
+    order = '>' if msg.is_bigendian else '<'
+    spec = {
+        fld.name: (int(fld.offset), order + _FIELD_DTYPES[int(fld.datatype)])
+        for fld in msg.fields
+        if int(fld.datatype) in _FIELD_DTYPES
+    }
+    if not {'x', 'y', 'z'} <= spec.keys():
+        raise ValueError(f'PointCloud2 has no x, y, z fields (fields: {", ".join(spec)})')
+    n = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
+    if data.size < n * step:
+        raise ValueError(f'PointCloud2 data holds {data.size} bytes, {n} points need {n * step}')
+    dtype = np.dtype(
+        {
+            'names': list(spec),
+            'formats': [fmt for _, fmt in spec.values()],
+            'offsets': [off for off, _ in spec.values()],
+            'itemsize': step,
+        }
+    )
+    record = data[: n * step].view(dtype)
+    xyz = np.stack([record['x'], record['y'], record['z']], axis=1).astype(np.float32)
+    colors = None
+    if 'rgb' in spec:
+        field = np.ascontiguousarray(record['rgb'])
+        # Reinterpret the float's bits in the stored byte order, then go native.
+        packed = field.view(field.dtype.str[0] + 'u4').astype(np.uint32)
+        colors = np.stack([(packed >> s) & 0xFF for s in (16, 8, 0)], axis=1).astype(np.uint8)
+    labels = record['label'].astype(np.int64) if 'label' in spec else None
+    return xyz, colors, labels
+
+
+def rock_color(rock_id: int) -> tuple[float, float, float]:
+    """Return a distinct, stable RGB colour (0..1) per rock id (golden-angle hues); grey for 0."""
+    if rock_id <= 0:
+        return (0.6, 0.6, 0.6)
+    hue = (rock_id * 0.618033988749895) % 1.0
+    return colorsys.hsv_to_rgb(hue, 0.65, 0.95)
+
+
+def _marker(
+    f: MessageFactory,
+    hdr: Any,
+    ns: str,
+    marker_id: int,
+    kind: str,
+    action: str = 'ADD',
+    *,
+    position: Sequence[float] = (0.0, 0.0, 0.0),
+    orientation_xyzw: Sequence[float] = _IDENTITY_XYZW,
+    scale: Sequence[float] = (1.0, 1.0, 1.0),
+    rgba: Sequence[float] = (1.0, 1.0, 1.0, 1.0),
+    points: list[Any] | None = None,
+    text: str = '',
+) -> Any:
+    """Build a ``visualization_msgs/Marker`` with every field set (rosbags' Jazzy needs all)."""
+    cls = f.cls('visualization_msgs/msg/Marker')
+    empty_image = f.cls('sensor_msgs/msg/CompressedImage')(header=hdr, format='', data=f.u8(b''))
+    return cls(
+        header=hdr,
+        ns=ns,
+        id=marker_id,
+        type=getattr(cls, kind),
+        action=getattr(cls, action),
+        pose=pose(f, position, orientation_xyzw),
+        scale=f.cls('geometry_msgs/msg/Vector3')(x=scale[0], y=scale[1], z=scale[2]),
+        color=f.cls('std_msgs/msg/ColorRGBA')(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+        lifetime=f.cls('builtin_interfaces/msg/Duration')(sec=0, nanosec=0),
+        frame_locked=False,
+        points=points or [],
+        colors=[],
+        texture_resource='',
+        texture=empty_image,
+        uv_coordinates=[],
+        text=text,
+        mesh_resource='',
+        mesh_file=f.cls('visualization_msgs/msg/MeshFile')(filename='', data=f.u8(b'')),
+        mesh_use_embedded_materials=False,
+    )
+
+
+def marker_array(
+    f: MessageFactory,
+    rocks: Sequence[Mapping[str, Any]],
+    stamp_ns: int,
+    frame_id: str,
+    vertices: npt.ArrayLike | None = None,
+    faces: npt.ArrayLike | None = None,
+    face_labels: npt.ArrayLike | None = None,
+) -> Any:
+    """Build a ``visualization_msgs/MarkerArray`` showing each rock and its size.
+
+    The array starts with a DELETEALL marker (clears the previous result in RViz). Then, per rock
+    (``rock_color`` colours): namespace ``rocks``, id = rock id, a TRIANGLE_LIST of the rock's faces
+    when the labelled mesh is given, else a CUBE at the centroid with the principal-axes orientation
+    (``orientation_xyzw`` when the dict has it, identity otherwise) and edges a, b, c; namespace
+    ``rock_labels``, id = rock id, a TEXT_VIEW_FACING above the rock: ``"<id>: b <b> cm"``.
+
+    Args:
+        f: Message factory.
+        rocks: Rock dicts of ``report.json`` (``id``, ``centroid``, ``a``, ``b``, ``c`` at least).
+        stamp_ns: Header stamp [ns].
+        frame_id: Header frame (the frame of the centroids and mesh).
+        vertices: Vx3 mesh vertices, optional.
+        faces: Fx3 vertex indices, optional (with ``vertices`` and ``face_labels``).
+        face_labels: F rock ids per face (0 = ground), optional.
+
+    Raises:
+        ValueError: A rock dict lacks a key, or only part of the mesh is given.
+
+    """
+    hdr = header(f, stamp_ns, frame_id)
+    mesh = (vertices, faces, face_labels)
+    if any(m is not None for m in mesh) and any(m is None for m in mesh):
+        raise ValueError('give vertices, faces and face_labels together, or none of them')
+    verts = tri = lab = None
+    if vertices is not None and faces is not None and face_labels is not None:
+        verts = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        tri = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        lab = np.asarray(face_labels).reshape(-1)
+        if lab.shape[0] != tri.shape[0]:
+            raise ValueError(f'{tri.shape[0]} faces but {lab.shape[0]} face labels')
+    point_cls = f.cls('geometry_msgs/msg/Point')
+    markers = [_marker(f, hdr, '', 0, 'CUBE', 'DELETEALL')]
+    for rock in rocks:
+        what = f'rock {rock.get("id", "?")}'
+        rock_id = int(_get(rock, 'id', what))
+        centroid = [float(v) for v in _get(rock, 'centroid', what)]
+        a, b, c = (_nan(_get(rock, k, what)) for k in ('a', 'b', 'c'))
+        quat = [float(v) for v in rock.get('orientation_xyzw') or _IDENTITY_XYZW]
+        red, green, blue = rock_color(rock_id)
+        corners = None
+        if verts is not None and tri is not None and lab is not None:
+            corners = verts[tri[lab == rock_id].reshape(-1)]
+        if corners is not None and len(corners):
+            pts = [point_cls(x=float(x), y=float(y), z=float(z)) for x, y, z in corners]
+            markers.append(
+                _marker(
+                    f,
+                    hdr,
+                    'rocks',
+                    rock_id,
+                    'TRIANGLE_LIST',
+                    points=pts,
+                    rgba=(red, green, blue, 1.0),
+                )
+            )
+        else:
+            box = [v if math.isfinite(v) and v > 0 else 0.01 for v in (a, b, c)]
+            markers.append(
+                _marker(
+                    f,
+                    hdr,
+                    'rocks',
+                    rock_id,
+                    'CUBE',
+                    position=centroid,
+                    orientation_xyzw=quat,
+                    scale=box,
+                    rgba=(red, green, blue, 0.7),
+                )
+            )
+        height = min(max(0.5 * b, 0.03), 0.3) if math.isfinite(b) else 0.05
+        top = list(centroid)
+        top[2] += (0.5 * c if math.isfinite(c) else 0.0) + height
+        size = f'{100 * b:.1f} cm' if math.isfinite(b) else 'unknown'
+        markers.append(
+            _marker(
+                f,
+                hdr,
+                'rock_labels',
+                rock_id,
+                'TEXT_VIEW_FACING',
+                position=top,
+                scale=(height, height, height),
+                text=f'{rock_id}: b {size}',
+            )
+        )
+    return f.cls('visualization_msgs/msg/MarkerArray')(markers=markers)
+
+
+def _level(status_cls: Any, level: int | str) -> Any:
+    """Level constant of the library (rclpy wants bytes, rosbags an int) from a name or 0..3."""
+    if isinstance(level, str):
+        name = level.upper()
+        if name not in DIAGNOSTIC_LEVELS:
+            raise ValueError(
+                f'unknown diagnostic level {level!r} (use {", ".join(DIAGNOSTIC_LEVELS)})'
+            )
+    else:
+        if not 0 <= int(level) < len(DIAGNOSTIC_LEVELS):
+            raise ValueError(f'diagnostic level {level} is not in 0..3')
+        name = DIAGNOSTIC_LEVELS[int(level)]
+    return getattr(status_cls, name)
+
+
+def diagnostic_array(
+    f: MessageFactory, stamp_ns: int, entries: Sequence[Mapping[str, Any]], frame_id: str = ''
+) -> Any:
+    """Build a ``diagnostic_msgs/DiagnosticArray``.
+
+    Args:
+        f: Message factory.
+        stamp_ns: Header stamp [ns].
+        entries: One dict per status: ``name``, ``level`` (``"OK"``, ``"WARN"``, ``"ERROR"``,
+            ``"STALE"`` or 0..3), ``message``, optional ``hardware_id`` and ``values`` (a mapping
+            whose values are written with ``str``).
+        frame_id: Header frame (usually empty).
+
+    Raises:
+        ValueError: An entry lacks ``name``/``level`` or has an unknown level.
+
+    """
+    status_cls = f.cls('diagnostic_msgs/msg/DiagnosticStatus')
+    key_value = f.cls('diagnostic_msgs/msg/KeyValue')
+    status = []
+    for entry in entries:
+        name = str(_get(entry, 'name', 'diagnostic entry'))
+        status.append(
+            status_cls(
+                level=_level(status_cls, _get(entry, 'level', f'diagnostic entry {name}')),
+                name=name,
+                message=str(entry.get('message', '')),
+                hardware_id=str(entry.get('hardware_id', '')),
+                values=[
+                    key_value(key=str(k), value=str(v))
+                    for k, v in (entry.get('values') or {}).items()
+                ],
+            )
+        )
+    return f.cls('diagnostic_msgs/msg/DiagnosticArray')(
+        header=header(f, stamp_ns, frame_id), status=status
+    )
+
+
+def rock_msg(f: MessageFactory, rock: Mapping[str, Any], stamp_ns: int, frame_id: str) -> Any:
+    """Build ``stockpile_msgs/Rock`` from a ``report.json`` rock dict.
+
+    ``fer`` fills ``flat_elongated_ratio``; ``orientation_xyzw`` is used when present, identity
+    otherwise; null numbers become NaN.
+
+    Raises:
+        ValueError: A required key is missing.
+
+    """
+    what = f'rock {rock.get("id", "?")}'
+    x, y, z = (float(v) for v in _get(rock, 'centroid', what))
+    qx, qy, qz, qw = (float(v) for v in rock.get('orientation_xyzw') or _IDENTITY_XYZW)
+    number = {
+        key: _nan(_get(rock, src, what))
+        for key, src in (
+            ('a', 'a'),
+            ('b', 'b'),
+            ('c', 'c'),
+            ('esd', 'esd'),
+            ('volume', 'volume'),
+            ('mass', 'mass'),
+            ('visible_area', 'visible_area'),
+            ('visible_fraction', 'visible_fraction'),
+            ('flat_elongated_ratio', 'fer'),
+            ('sphericity', 'sphericity'),
+            ('confidence', 'confidence'),
+        )
+    }
+    return f.cls('stockpile_msgs/msg/Rock')(
+        header=header(f, stamp_ns, frame_id),
+        id=int(_get(rock, 'id', what)),
+        centroid=f.cls('geometry_msgs/msg/Point')(x=x, y=y, z=z),
+        orientation=f.cls('geometry_msgs/msg/Quaternion')(x=qx, y=qy, z=qz, w=qw),
+        **number,
+    )
+
+
+def rock_array(
+    f: MessageFactory,
+    rocks: Sequence[Mapping[str, Any]],
+    scale: Mapping[str, Any],
+    stamp_ns: int,
+    frame_id: str,
+) -> Any:
+    """Build ``stockpile_msgs/RockArray`` from ``report.json``'s ``rocks`` and ``scale``.
+
+    ``metric`` is false when the scale method is ``"none"``; a null ``rel_uncertainty`` becomes NaN.
+
+    Raises:
+        ValueError: A required key is missing.
+
+    """
+    method = str(_get(scale, 'method', 'scale'))
+    return f.cls('stockpile_msgs/msg/RockArray')(
+        header=header(f, stamp_ns, frame_id),
+        rocks=[rock_msg(f, rock, stamp_ns, frame_id) for rock in rocks],
+        metric=method != 'none',
+        scale_method=method,
+        scale_rel_uncertainty=_nan(scale.get('rel_uncertainty')),
+    )
+
+
+def gradation_msg(
+    f: MessageFactory, gradation: Mapping[str, Any], stamp_ns: int, frame_id: str
+) -> Any:
+    """Build ``stockpile_msgs/Gradation`` from ``report.json``'s ``gradation`` dict.
+
+    Null sizes become NaN; a missing or null ``spec`` gives an empty class, not checked, not passed.
+
+    Raises:
+        ValueError: A required key is missing.
+
+    """
+    what = 'gradation'
+    spec = gradation.get('spec') or {}
+    numbers = {
+        key: _nan(_get(gradation, key, what))
+        for key in ('d10', 'd15', 'd30', 'd50', 'd60', 'd85', 'd100', 'cu', 'cc', 'total_mass')
+    }
+    return f.cls('stockpile_msgs/msg/Gradation')(
+        header=header(f, stamp_ns, frame_id),
+        size_measure=str(_get(gradation, 'size_measure', what)),
+        sizes=f.f64(_get(gradation, 'sizes', what)),
+        percent_passing_count=f.f64(_get(gradation, 'percent_passing_count', what)),
+        percent_passing_mass=f.f64(_get(gradation, 'percent_passing_mass', what)),
+        rock_count=int(_get(gradation, 'rock_count', what)),
+        spec_class=str(spec.get('class') or ''),
+        checked=bool(spec.get('checked', False)),
+        passed=bool(spec.get('passed') or False),
+        reasons=[str(r) for r in spec.get('reasons', [])],
+        **numbers,
+    )
+
+
+def pipeline_status(
+    f: MessageFactory,
+    stamp_ns: int,
+    state: int | str,
+    stage: str,
+    progress: float,
+    keyframes: int,
+    coverage: float,
+    message: str,
+    advice: str = '',
+    frame_id: str = '',
+) -> Any:
+    """Build ``stockpile_msgs/PipelineStatus``.
+
+    Args:
+        f: Message factory.
+        stamp_ns: Header stamp [ns].
+        state: A name of :data:`PIPELINE_STATES` (any case, with or without ``STATE_``) or 0..5.
+        stage: The stage running or last run.
+        progress: 0..1 within the stage.
+        keyframes: Keyframes held.
+        coverage: 0..1, how well the pile is covered.
+        message: What happened.
+        advice: What the operator should do, when something went wrong.
+        frame_id: Header frame (usually empty).
+
+    Raises:
+        ValueError: Unknown state.
+
+    """
+    if isinstance(state, str):
+        name = state.upper().removeprefix('STATE_')
+        if name not in PIPELINE_STATES:
+            raise ValueError(f'unknown state {state!r} (use {", ".join(PIPELINE_STATES)})')
+        value = PIPELINE_STATES.index(name)
+    else:
+        value = int(state)
+        if not 0 <= value < len(PIPELINE_STATES):
+            raise ValueError(f'state {state} is not in 0..{len(PIPELINE_STATES) - 1}')
+    return f.cls('stockpile_msgs/msg/PipelineStatus')(
+        header=header(f, stamp_ns, frame_id),
+        state=value,
+        stage=stage,
+        progress=float(progress),
+        keyframes=int(keyframes),
+        coverage=float(coverage),
+        message=message,
+        advice=advice,
+    )

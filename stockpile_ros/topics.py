@@ -1,0 +1,47 @@
+"""Names of what the node set subscribes to and publishes (REP 144), shared by nodes and replay.
+
+Relative names, so that a launch namespace or remapping moves them all. The replay writes the same
+names, absolute, into its output bag.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    'CAMERA_INFO',
+    'COMPRESSED_SUFFIX',
+    'DENSE_CLOUD',
+    'DIAGNOSTICS',
+    'GRADATION',
+    'IMAGE',
+    'KEYFRAME_STATUS',
+    'MESH',
+    'MESH_READY',
+    'ODOMETRY',
+    'RECONSTRUCT_SERVICE',
+    'ROCKS',
+    'ROCK_MARKERS',
+    'SEGMENTED_CLOUD',
+    'STATUS',
+    'TRIGGER',
+]
+
+# Inputs.
+IMAGE = 'camera/image_raw'
+COMPRESSED_SUFFIX = '/compressed'
+CAMERA_INFO = 'camera/camera_info'
+ODOMETRY = 'odom'
+TRIGGER = 'stockpile/trigger'  # std_msgs/Empty: reconstruct now (recorded triggers replay)
+RECONSTRUCT_SERVICE = 'stockpile/reconstruct'  # std_srvs/Trigger
+
+# Outputs.
+KEYFRAME_STATUS = 'stockpile/keyframes/status'  # stockpile_msgs/PipelineStatus
+# Absolute: the diagnostic aggregator listens there.
+DIAGNOSTICS = '/diagnostics'  # diagnostic_msgs/DiagnosticArray
+DENSE_CLOUD = 'stockpile/dense_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb)
+MESH = 'stockpile/mesh'  # visualization_msgs/MarkerArray (the Poisson surface as a triangle list)
+MESH_READY = 'stockpile/mesh_ready'  # std_msgs/String: the work folder whose mesh/ is ready
+SEGMENTED_CLOUD = 'stockpile/segmented_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb, label)
+ROCK_MARKERS = 'stockpile/rock_markers'  # visualization_msgs/MarkerArray
+ROCKS = 'stockpile/rocks'  # stockpile_msgs/RockArray
+GRADATION = 'stockpile/gradation'  # stockpile_msgs/Gradation
+STATUS = 'stockpile/status'  # stockpile_msgs/PipelineStatus
