@@ -17,7 +17,7 @@ from ..errors import StockpileError
 __all__ = ['main']
 
 # Subcommands in the order --help lists them.
-COMMANDS = ('info',)
+COMMANDS = ('info', 'simulate', 'segment')
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,106 @@
+"""Face geometry and face adjacency over shared edges of a triangle mesh."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ['FaceAdjacency', 'FaceGeometry', 'face_adjacency', 'face_geometry']
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class FaceGeometry:
+    """Per-face centroid, unit normal and area.
+
+    Attributes:
+        centroids: Mx3 face centroids.
+        normals: Mx3 unit face normals (right-hand rule on the vertex order); zero for degenerate
+        faces.
+        areas: M face areas.
+
+    """
+
+    centroids: F64
+    normals: F64
+    areas: F64
+
+
+@dataclass(frozen=True)
+class FaceAdjacency:
+    """Faces sharing an edge.
+
+    Attributes:
+        n_faces: Number of faces M.
+        i: E first faces of each shared edge (``i < j``).
+        j: E second faces.
+
+    """
+
+    n_faces: int
+    i: I64
+    j: I64
+
+    @property
+    def src(self) -> I64:
+        """Directed edges' sources: pairs ``i -> j`` first, then ``j -> i``."""
+        return np.concatenate([self.i, self.j])
+
+    @property
+    def dst(self) -> I64:
+        """Directed edges' destinations, matching :attr:`src`."""
+        return np.concatenate([self.j, self.i])
+
+    def neighbour_count(self) -> I64:
+        """Count the neighbours of each face."""
+        return np.bincount(self.i, minlength=self.n_faces) + np.bincount(
+            self.j, minlength=self.n_faces
+        )
+
+
+def face_geometry(vertices: npt.ArrayLike, faces: npt.ArrayLike) -> FaceGeometry:
+    """Centroids, unit normals and areas of the faces of a triangle mesh."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    cross = np.cross(p1 - p0, p2 - p0)
+    norm = np.sqrt(np.einsum('ij,ij->i', cross, cross))
+    normals = np.zeros_like(cross)
+    ok = norm > 0
+    normals[ok] = cross[ok] / norm[ok, None]
+    return FaceGeometry(centroids=(p0 + p1 + p2) / 3.0, normals=normals, areas=0.5 * norm)
+
+
+def face_adjacency(faces: npt.ArrayLike, n_vertices: int | None = None) -> FaceAdjacency:
+    """Pairs of faces sharing an edge.
+
+    An edge shared by more than two faces (non-manifold) links those faces in a chain rather than
+    all
+    pairs: Poisson meshes are manifold, so this only keeps odd input usable.
+
+    Args:
+        faces: Mx3 vertex indices.
+        n_vertices: Number of vertices; defaults to the largest index + 1.
+
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    m = len(f)
+    if m == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return FaceAdjacency(0, empty, empty)
+    nv = int(f.max()) + 1 if n_vertices is None else int(n_vertices)
+    a = f.ravel()
+    b = f[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * nv + np.maximum(a, b)
+    order = np.argsort(key)
+    key = key[order]
+    face_of = order // 3
+    same = np.flatnonzero(key[1:] == key[:-1])
+    i, j = face_of[same], face_of[same + 1]
+    keep = i != j
+    lo, hi = np.minimum(i[keep], j[keep]), np.maximum(i[keep], j[keep])
+    return FaceAdjacency(m, lo, hi)

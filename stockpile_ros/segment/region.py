@@ -1,0 +1,78 @@
+"""Region growing of the paper's search, vectorised and exact.
+
+The paper's search starts at a seed, adds every unvisited neighbour that passes Eq. 2 from the
+face it
+stands on, and restarts at the next unvisited face until the mesh is covered. The faces one run
+collects are the faces reachable from its seed in the directed graph of passing edges, restricted to
+faces no earlier run took. The union of earlier runs is closed under that reachability (a run stops
+only where no passing edge leads out), so the restriction changes nothing: a face belongs to the
+first seed, in seed order, that can reach it.
+
+That is computed here with one compiled depth-first search: virtual nodes ``v_0 -> v_1 -> ...``
+chain
+the seeds, ``v_k`` points first to seed ``k`` and then to ``v_{k+1}``; a depth-first search from
+``v_0`` finishes everything seed ``k`` reaches before it moves on to ``v_{k+1}``, so the run of a
+face
+is the number of virtual nodes before it in the discovery order. The labels equal those of the
+per-face search in :mod:`stockpile_ros.segment.bfs` exactly (tested), at compiled speed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+from scipy.sparse.csgraph import depth_first_order
+
+__all__ = ['grow_regions']
+
+I64 = npt.NDArray[np.int64]
+
+
+def grow_regions(n_faces: int, src: I64, dst: I64, seeds: I64) -> npt.NDArray[np.int32]:
+    """Label faces by the first seed that reaches them over directed passing edges.
+
+    Args:
+        n_faces: Number of faces.
+        src: Source face of every passing directed edge (current face of Eq. 2).
+        dst: Destination face of every passing directed edge (the neighbour it admits).
+        seeds: Faces in the order the search restarts from them; faces left out are never seeds
+            and are only reached from seeds (label 0 if none reaches them).
+
+    Returns:
+        Per-face labels 1..K numbered in seed order, 0 for faces no seed reaches.
+
+    Raises:
+        RuntimeError: scipy's search did not discover nodes in the order this relies on.
+
+    """
+    n_seeds = len(seeds)
+    labels = np.zeros(n_faces, dtype=np.int32)
+    if n_seeds == 0:
+        return labels
+    n = n_faces + n_seeds
+    virtual = n_faces + np.arange(n_seeds, dtype=np.int64)
+    rows = np.concatenate([src, virtual, virtual[:-1]])
+    cols = np.concatenate([dst, seeds.astype(np.int64), virtual[1:]])
+    # Canonical CSR sorts each row by column: a virtual row lists its seed (a face, so a smaller
+    # index) before the next virtual node, which is what the chain needs.
+    graph = sp.coo_matrix(
+        (np.ones(len(cols), dtype=np.int8), (rows.astype(np.int32), cols.astype(np.int32))),
+        shape=(n, n),
+    ).tocsr()
+    graph.sort_indices()
+    found = np.asarray(
+        depth_first_order(graph, int(virtual[0]), directed=True, return_predecessors=False),
+        dtype=np.int64,
+    )
+    is_virtual = found >= n_faces
+    if np.any(np.diff(found[is_virtual]) != 1):
+        raise RuntimeError('depth-first search did not follow the seed chain in order')
+    run = np.cumsum(is_virtual)[~is_virtual]
+    faces = found[~is_virtual]
+    # Runs whose seed an earlier run had already taken are empty: renumber the rest 1..K.
+    present = np.zeros(n_seeds + 1, dtype=bool)
+    present[run] = True
+    renumber = np.cumsum(present).astype(np.int32)
+    labels[faces] = renumber[run]
+    return labels

@@ -1,0 +1,63 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from stockpile_ros.errors import StockpileError
+from stockpile_ros.segment.gradation import check_class, gradation, load_class_table, percent_size
+
+
+def test_hand_computed_gradation() -> None:
+    g = gradation([0.4, 0.1, 0.3, 0.2], [4.0, 1.0, 3.0, 2.0])
+    assert g['sizes'] == [0.1, 0.2, 0.3, 0.4]
+    assert g['percent_passing_mass'] == pytest.approx([10, 30, 60, 100])
+    assert g['percent_passing_count'] == pytest.approx([25, 50, 75, 100])
+    assert g['d10'] == pytest.approx(0.1)
+    assert g['d30'] == pytest.approx(0.2)
+    assert g['d60'] == pytest.approx(0.3)
+    assert g['d100'] == pytest.approx(0.4)
+    # Linear in log size between (0.2, 30 %) and (0.3, 60 %).
+    assert g['d50'] == pytest.approx(math.exp(math.log(0.2) + 20 / 30 * math.log(1.5)))
+    assert g['d85'] == pytest.approx(math.exp(math.log(0.3) + 25 / 40 * math.log(4 / 3)))
+    assert g['cu'] == pytest.approx(3.0)
+    assert g['cc'] == pytest.approx(0.04 / 0.03)
+    assert g['rock_count'] == 4 and g['total_mass'] == pytest.approx(10)
+    assert g['spec'] == {'class': None, 'checked': False, 'passed': None, 'reasons': []}
+
+
+def test_undefined_below_the_first_point_and_ties() -> None:
+    g = gradation([0.2, 0.2, 0.5], [3.0, 3.0, 4.0])
+    assert g['percent_passing_mass'] == pytest.approx([60, 60, 100])
+    assert g['d10'] is None and g['cu'] is None and g['cc'] is None
+    assert g['d60'] == pytest.approx(0.2)
+    assert percent_size([], [], 50) is None
+    empty = gradation([], [])
+    assert empty['d50'] is None and empty['rock_count'] == 0
+
+
+def test_class_table_and_check() -> None:
+    table = load_class_table()
+    spec = table['classes']['III']
+    assert spec['limits']['d50'] == pytest.approx([11.5 * 0.0254, 14.0 * 0.0254])
+    inch = 0.0254
+    good = {'d15': 9 * inch, 'd50': 12 * inch, 'd85': 17 * inch, 'd100': 20 * inch}
+    assert check_class(good, spec) == {
+        'class': 'III',
+        'checked': True,
+        'passed': True,
+        'reasons': [],
+    }
+    bad = dict(good, d50=16 * inch, d15=None)
+    result = check_class(bad, spec)
+    assert result['passed'] is False
+    assert len(result['reasons']) == 2
+    assert any('D50' in r and 'above' in r for r in result['reasons'])
+    assert any('D15 undefined' in r for r in result['reasons'])
+
+
+def test_bad_class_table(tmp_path) -> None:
+    path = tmp_path / 'bad.yaml'
+    path.write_text('classes: {A: {limits: {d42: [1, 2]}}}\n')
+    with pytest.raises(StockpileError):
+        load_class_table(path)

@@ -1,0 +1,73 @@
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from segment_fixtures import small_pile
+
+from stockpile_ros.cli import main
+from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+
+ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',
+             'visible_fraction', 'fer', 'sphericity', 'confidence'}  # fmt: skip
+GRAD_KEYS = {'size_measure', 'sizes', 'percent_passing_count', 'percent_passing_mass', 'd10',
+             'd15', 'd30', 'd50', 'd60', 'd85', 'd100', 'cu', 'cc', 'rock_count', 'total_mass',
+             'spec'}  # fmt: skip
+
+
+def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
+    v, f, _ = small_pile()
+    mesh_path = tmp_path / 'mesh.ply'
+    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    info = {'schema': 'stockpile-mesh/1', 'frame_id': 'stockpile', 'units': 'm',
+            'scale': {'method': 'target', 'metres_per_unit': 0.5, 'rel_uncertainty': 0.01},
+            'keyframes': [{'stamp_ns': 5, 'position': [1, 2, 3],
+                           'orientation_xyzw': [0, 0, 0, 1]}]}  # fmt: skip
+    (tmp_path / 'mesh.json').write_text(json.dumps(info))
+    out = tmp_path / 'result'
+    status = main([
+        'segment', str(mesh_path), '--out', str(out), '--mesh-info', str(tmp_path / 'mesh.json'),
+        '--spec-class', 'I',
+    ])  # fmt: skip
+    assert status == 0
+    assert 'rocks' in capsys.readouterr().out
+    report = json.loads((out / 'report.json').read_text(), parse_constant=lambda c: 1 / 0)
+    assert report['schema'] == 'stockpile-report/1'
+    assert report['units'] == 'm' and report['frame_id'] == 'stockpile'
+    assert report['scale'] == info['scale'] and report['keyframes'] == info['keyframes']
+    assert len(report['rocks']) >= 3
+    for rock in report['rocks']:
+        assert set(rock) == ROCK_KEYS
+        assert rock['a'] >= rock['b'] >= rock['c'] > 0
+        assert 0 <= rock['confidence'] <= 1 and 0 < rock['visible_fraction'] <= 1
+    assert set(report['gradation']) == GRAD_KEYS
+    spec = report['gradation']['spec']
+    assert spec['class'] == 'I' and spec['checked'] and isinstance(spec['passed'], bool)
+    assert report['segmentation']['mode'] == 'default'
+    assert report['mesh']['faces'] == len(f)
+    seg = read_labelled_mesh(out / 'segments.ply')
+    assert len(seg.faces) == len(f)
+    assert set(np.unique(seg.labels)) >= {r['id'] for r in report['rocks']}
+    rows = (out / 'rocks.csv').read_text().strip().splitlines()
+    assert len(rows) == len(report['rocks']) + 1
+    html = (out / 'index.html').read_text()
+    assert 'data:image/png;base64,' in html and 'Stockpile report' in html
+    for name in ('gradation.png', 'render.png'):
+        assert (out / name).read_bytes()[:4] == b'\x89PNG'
+
+
+def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
+    v, f, _ = small_pile()
+    mesh_path = tmp_path / 'mesh.ply'
+    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    out = tmp_path / 'paper'
+    assert main(['segment', str(mesh_path), '--out', str(out), '--mode', 'paper']) == 0
+    report = json.loads((out / 'report.json').read_text())
+    assert report['scale']['method'] == 'none'
+    assert report['segmentation']['threshold'] == 0.7
+    assert report['gradation']['spec']['checked'] is False
+
+
+def test_cli_errors_are_messages(tmp_path, capsys) -> None:
+    assert main(['segment', str(tmp_path / 'missing.ply'), '--out', str(tmp_path / 'o')]) == 2
+    assert 'no such mesh' in capsys.readouterr().err
