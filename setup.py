@@ -45,6 +45,10 @@ setup(
     entry_points={
         'console_scripts': [
             'stockpile = stockpile_ros.cli:main',
+            'keyframe_node = stockpile_ros.nodes.keyframe_node:main',
+            'reconstruction_node = stockpile_ros.nodes.reconstruction_node:main',
+            'segmentation_node = stockpile_ros.nodes.segmentation_node:main',
+            'rig = stockpile_ros.nodes.rig:main',
         ],
     },
 )

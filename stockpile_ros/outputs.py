@@ -28,6 +28,7 @@ __all__ = [
     'diagnostic_array',
     'gradation_msg',
     'marker_array',
+    'mesh_marker_array',
     'pipeline_status',
     'pointcloud2',
     'pointcloud2_arrays',
@@ -211,6 +212,7 @@ def _marker(
     scale: Sequence[float] = (1.0, 1.0, 1.0),
     rgba: Sequence[float] = (1.0, 1.0, 1.0, 1.0),
     points: list[Any] | None = None,
+    colors: list[Any] | None = None,
     text: str = '',
 ) -> Any:
     """Build a ``visualization_msgs/Marker`` with every field set (rosbags' Jazzy needs all)."""
@@ -228,7 +230,7 @@ def _marker(
         lifetime=f.cls('builtin_interfaces/msg/Duration')(sec=0, nanosec=0),
         frame_locked=False,
         points=points or [],
-        colors=[],
+        colors=colors or [],
         texture_resource='',
         texture=empty_image,
         uv_coordinates=[],
@@ -337,6 +339,44 @@ def marker_array(
             )
         )
     return f.cls('visualization_msgs/msg/MarkerArray')(markers=markers)
+
+
+def mesh_marker_array(
+    f: MessageFactory,
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    stamp_ns: int,
+    frame_id: str,
+    colors: npt.ArrayLike | None = None,
+    ns: str = 'mesh',
+) -> Any:
+    """Build a ``visualization_msgs/MarkerArray`` holding one mesh as a TRIANGLE_LIST (id 0).
+
+    Args:
+        f: Message factory.
+        vertices: Vx3 vertices.
+        faces: Fx3 vertex indices.
+        stamp_ns: Header stamp [ns].
+        frame_id: Header frame.
+        colors: Vx3 uint8 vertex colours (one colour per triangle corner in the marker), or None
+            for a uniform grey.
+        ns: Marker namespace.
+
+    """
+    hdr = header(f, stamp_ns, frame_id)
+    verts = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    corners = np.asarray(faces, dtype=np.int64).reshape(-1)
+    point_cls = f.cls('geometry_msgs/msg/Point')
+    pts = [point_cls(x=float(x), y=float(y), z=float(z)) for x, y, z in verts[corners]]
+    rgba = None
+    if colors is not None:
+        color_cls = f.cls('std_msgs/msg/ColorRGBA')
+        rgb = np.asarray(colors, dtype=np.float64).reshape(-1, 3)[corners] / 255.0
+        rgba = [color_cls(r=float(r), g=float(g), b=float(b), a=1.0) for r, g, b in rgb]
+    marker = _marker(
+        f, hdr, ns, 0, 'TRIANGLE_LIST', points=pts, colors=rgba, rgba=(0.7, 0.7, 0.7, 1.0)
+    )
+    return f.cls('visualization_msgs/msg/MarkerArray')(markers=[marker])
 
 
 def _level(status_cls: Any, level: int | str) -> Any:

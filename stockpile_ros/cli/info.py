@@ -7,9 +7,7 @@ import json
 
 from ..bagio.summary import format_summary, summarize
 
-__all__ = ['DESCRIPTION', 'HELP', 'add_arguments', 'run']
-
-HELP = 'summarise a ROS 2 bag: topics, images, camera_info, odometry, problems'
+__all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
 DESCRIPTION = """\
 Summarise a ROS 2 bag (a rosbag2 folder, an .mcap or a .db3 file; MCAP or sqlite3).

@@ -17,9 +17,8 @@ from ..segment.pipeline import analyse_mesh
 from ..segment.report import write_result_folder
 from ..segment.segmentation import SegmentParams
 
-__all__ = ['DESCRIPTION', 'HELP', 'add_arguments', 'run']
+__all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
-HELP = 'segment a stockpile mesh into rocks and report sizes, shapes and gradation'
 DESCRIPTION = """Segment a stockpile mesh (metric, z up, ground at z = 0) into rocks with the
 curvature
 search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass, sphericity...) and the

@@ -12,9 +12,8 @@ from ..sim.pile import PileConfig, parse_gradation
 from ..sim.record import SimulationConfig, simulate
 from ..sim.scene import SceneConfig
 
-__all__ = ['DESCRIPTION', 'HELP', 'add_arguments', 'run']
+__all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
-HELP = 'render a ROS 2 bag of a synthetic rock pile with its ground truth'
 DESCRIPTION = """\
 Build a pile of angular rocks (sizes from --gradation, stacked by dropping each rock onto the
 ground and the rocks already placed), lay an optional ChArUco board beside it, drive a camera cart

@@ -1,0 +1,184 @@
+"""Keyframe collection from a live or recorded stream: the one code path of node and replay.
+
+Coverage, 0..1, says how much of the way around the pile the accepted keyframes reach:
+
+- with odometry, the share of the 36 ten-degree heading sectors swept by the camera between
+  consecutive keyframes (yaw of the odometry orientation, shorter arc between neighbours); a
+  camera that keeps the pile in view while circling it turns its heading as far as it goes
+  around, so a full orbit gives 1 and a 90 degree arc about 0.25;
+- without odometry, the parallax summed over the accepted keyframes (median tracked corner
+  displacement, in image widths) over ``full_parallax``: a rough proxy that grows with the
+  distance travelled across the view, not with the angle around the pile.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .camera import Frame
+from .recon.keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
+
+__all__ = [
+    'HEADING_SECTORS',
+    'CollectorState',
+    'KeyframeCollector',
+    'OdometryBuffer',
+    'heading_coverage',
+]
+
+HEADING_SECTORS = 36
+
+
+def _yaw(quat_xyzw: Any) -> float:
+    x, y, z, w = (float(v) for v in quat_xyzw)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def heading_coverage(yaws: list[float]) -> float:
+    """Share of :data:`HEADING_SECTORS` sectors swept by consecutive headings [rad]."""
+    if not yaws:
+        return 0.0
+    width = 2 * math.pi / HEADING_SECTORS
+    hit = np.zeros(HEADING_SECTORS, dtype=bool)
+    hit[int((yaws[0] % (2 * math.pi)) // width) % HEADING_SECTORS] = True
+    for a, b in itertools.pairwise(yaws):
+        step = (b - a + math.pi) % (2 * math.pi) - math.pi
+        n = max(1, math.ceil(abs(step) / (width / 2)))
+        for t in np.linspace(0.0, 1.0, n + 1):
+            hit[int(((a + t * step) % (2 * math.pi)) // width) % HEADING_SECTORS] = True
+    # One sector is hit by any single keyframe: count the sweep beyond it.
+    return float(max(0, int(hit.sum()) - 1) / (HEADING_SECTORS - 1))
+
+
+@dataclass
+class CollectorState:
+    """What the collector holds.
+
+    Attributes:
+        frames: Frames pushed.
+        keyframes: Keyframes stored (resumed ones included).
+        coverage: 0..1, see the module documentation.
+        coverage_source: ``"odometry"`` or ``"parallax"``.
+        decisions: Count of each decision reason.
+        last: The last decision, None before the first frame.
+
+    """
+
+    frames: int = 0
+    keyframes: int = 0
+    coverage: float = 0.0
+    coverage_source: str = 'parallax'
+    decisions: dict[str, int] = field(default_factory=dict)
+    last: Decision | None = None
+
+
+class KeyframeCollector:
+    """Select keyframes from frames as they come and store them in ``keyframes/``.
+
+    Resumes from what the folder already holds (the selector continues from its last keyframe).
+
+    Args:
+        folder: The work folder's ``keyframes/``.
+        options: Selector thresholds.
+        full_parallax: Summed parallax [image widths] counted as full coverage without odometry.
+
+    """
+
+    def __init__(
+        self, folder: str | Path, options: SelectorOptions | None = None, full_parallax: float = 6.0
+    ) -> None:
+        self.store = KeyframeStore(folder)
+        self.selector = KeyframeSelector(options)
+        self.full_parallax = full_parallax
+        self.state = CollectorState(keyframes=len(self.store.records))
+        self._parallax = 0.0
+        self._yaws = [
+            _yaw(r.odometry['orientation_xyzw'])
+            for r in self.store.records
+            if r.odometry is not None and 'orientation_xyzw' in r.odometry
+        ]
+        if self.store.records:
+            self.selector.resume(self.store.image(self.store.records[-1]), len(self.store.records))
+        self._update_coverage()
+
+    def _update_coverage(self) -> None:
+        if self._yaws:
+            self.state.coverage = heading_coverage(self._yaws)
+            self.state.coverage_source = 'odometry'
+        else:
+            self.state.coverage = min(1.0, self._parallax / self.full_parallax)
+            self.state.coverage_source = 'parallax'
+
+    def push(self, frame: Frame, odometry: dict[str, Any] | None = None) -> Decision:
+        """Offer one frame; store it when it is a keyframe.
+
+        Args:
+            frame: The decoded frame (its ``camera`` is stored with it; None: self-calibration).
+            odometry: The ``keyframes.jsonl`` odometry entry at the frame's stamp, or None.
+
+        Returns:
+            The selector's decision.
+
+        """
+        decision = self.selector.push(frame.image)
+        self.state.frames += 1
+        self.state.decisions[decision.reason] = self.state.decisions.get(decision.reason, 0) + 1
+        self.state.last = decision
+        if decision.accepted:
+            self.store.add(frame, odometry=odometry, reason=decision.reason,
+                           sharpness=decision.sharpness)  # fmt: skip
+            self.state.keyframes = len(self.store.records)
+            if math.isfinite(decision.parallax):
+                self._parallax += decision.parallax
+            if odometry is not None and 'orientation_xyzw' in odometry:
+                self._yaws.append(_yaw(odometry['orientation_xyzw']))
+            self._update_coverage()
+        return decision
+
+
+class OdometryBuffer:
+    """Recent odometry poses of a live stream, looked up at frame stamps.
+
+    The live counterpart of :class:`~stockpile_ros.recon.sources.OdometryTrack`: the nearest pose
+    within ``max_gap_ns`` of the frame (no camera offset: a live node has no transform tree here).
+
+    Args:
+        size: Poses kept.
+        max_gap_ns: Largest stamp difference accepted [ns].
+
+    """
+
+    def __init__(self, size: int = 400, max_gap_ns: int = 200_000_000) -> None:
+        self.max_gap_ns = max_gap_ns
+        self._poses: deque[tuple[int, dict[str, Any]]] = deque(maxlen=size)
+
+    def push(
+        self,
+        stamp_ns: int,
+        position: tuple[float, float, float],
+        orientation_xyzw: tuple[float, float, float, float],
+        frame_id: str,
+        child_frame_id: str,
+    ) -> None:
+        """Add one pose (in stamp order)."""
+        entry = {
+            'position': [float(v) for v in position],
+            'orientation_xyzw': [float(v) for v in orientation_xyzw],
+            'frame_id': frame_id,
+            'child_frame_id': child_frame_id,
+        }
+        self._poses.append((int(stamp_ns), entry))
+
+    def at(self, stamp_ns: int) -> dict[str, Any] | None:
+        """Return the ``keyframes.jsonl`` odometry entry nearest ``stamp_ns``, None if too far."""
+        if not self._poses:
+            return None
+        stamp, entry = min(self._poses, key=lambda p: abs(p[0] - stamp_ns))
+        return dict(entry) if abs(stamp - stamp_ns) <= self.max_gap_ns else None

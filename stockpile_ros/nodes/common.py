@@ -1,0 +1,121 @@
+"""What every node shares: the rclpy message factory, parameters from the settings table, QoS."""
+
+from __future__ import annotations
+
+import array
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosidl_runtime_py.utilities import get_message
+
+from ..publish import Publication
+from ..settings import Setting, Settings, build_settings, settings_for
+
+__all__ = [
+    'LATCHED',
+    'Publishers',
+    'RclpyFactory',
+    'current_settings',
+    'declare_settings',
+    'now_ns',
+]
+
+LATCHED = QoSProfile(
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    history=HistoryPolicy.KEEP_LAST,
+)
+"""Results: a dashboard that connects late still gets the last one (subscribe the same way)."""
+
+_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}  # fmt: skip
+
+
+class RclpyFactory:
+    """Message factory over the rclpy message packages (see stockpile_ros.messages)."""
+
+    def cls(self, msgtype: str) -> Any:
+        """Return the rclpy class of ``pkg/msg/Name``."""
+        return get_message(msgtype)
+
+    def u8(self, data: Any) -> Any:
+        """Return ``array('B')``, what rclpy stores ``uint8[]`` as."""
+        return array.array('B', bytes(memoryview(data).cast('B')) if not isinstance(data, bytes)
+                           else data)  # fmt: skip
+
+    def f64(self, data: Any) -> Any:
+        """Return a list of floats (rclpy accepts it for fixed and unbounded ``float64[]``)."""
+        flat = data.reshape(-1).tolist() if hasattr(data, 'reshape') else list(data)
+        return [float(v) for v in flat]
+
+
+def _descriptor(setting: Setting) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(
+        name=setting.name,
+        type=_TYPES[type(setting.default)],
+        description=setting.description,
+        read_only=setting.read_only,
+    )
+    if setting.choices:
+        descriptor.additional_constraints = 'one of: ' + ', '.join(setting.choices)
+    if setting.low is not None and setting.high is not None:
+        if isinstance(setting.default, float):
+            descriptor.floating_point_range = [
+                FloatingPointRange(
+                    from_value=float(setting.low), to_value=float(setting.high), step=0.0
+                )
+            ]
+        else:
+            descriptor.integer_range = [
+                IntegerRange(from_value=int(setting.low), to_value=int(setting.high), step=1)
+            ]
+    return descriptor  # fmt: skip
+
+
+def declare_settings(node: Node, component: str) -> None:
+    """Declare the parameters of ``component`` (settings table) with descriptors and ranges."""
+    for setting in settings_for(component):
+        node.declare_parameter(setting.name, setting.default, _descriptor(setting))
+
+
+def current_settings(node: Node, component: str) -> Settings:
+    """Build the option objects from the node's current parameter values."""
+    return build_settings(
+        {s.name: node.get_parameter(s.name).value for s in settings_for(component)}
+    )
+
+
+def now_ns(node: Node) -> int:
+    """Return the node's clock (simulated time under ``use_sim_time``) in nanoseconds."""
+    stamp: int = node.get_clock().now().nanoseconds
+    return stamp
+
+
+class Publishers:
+    """Latched publishers by topic, created up front, fed with ``(topic, message)`` pairs.
+
+    Args:
+        node: The node that owns them.
+        types: Message type (``pkg/msg/Name``) by relative topic name.
+
+    """
+
+    def __init__(self, node: Node, types: dict[str, str]) -> None:
+        self._pubs: dict[str, Publisher] = {
+            topic: node.create_publisher(get_message(msgtype), topic, LATCHED)
+            for topic, msgtype in types.items()
+        }
+
+    def publish(self, publications: list[Publication]) -> None:
+        """Publish each message on its topic."""
+        for topic, msg in publications:
+            self._pubs[topic].publish(msg)

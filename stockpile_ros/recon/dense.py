@@ -1,0 +1,385 @@
+"""Dense coloured point cloud with oriented normals from the registered keyframes, on the CPU.
+
+Each keyframe is paired with a nearby keyframe at a useful baseline; the pair is rectified
+(``cv2.stereoRectify``, vertical pairs transposed, right-to-left pairs mirrored) and matched with
+semi-global block matching over the disparity range the sparse points predict. Every depth map is
+then checked against the depth maps of neighbouring keyframes (each from its own pair): a point is
+kept only where another view sees the same surface at the same depth. The survivors are fused on a
+voxel grid; normals are estimated from neighbours and turned towards the cameras that saw them.
+With a CUDA build of pycolmap, COLMAP's PatchMatch stereo and fusion are used instead.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+import open3d as o3d
+import pycolmap
+
+from ..camera import CameraModel
+from ..errors import CaptureError
+from ..progress import progress
+from .sfm import SparseModel, View
+
+__all__ = ['DenseOptions', 'DepthView', 'dense_cloud', 'run_dense']
+
+F64 = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DenseOptions:
+    """Tuning of the dense stage.
+
+    Attributes:
+        work_width: Width [px] keyframes are downscaled to for stereo matching.
+        stride: Every ``stride``-th pixel (in both directions) becomes a point.
+        pair_window: Partners are searched among this many keyframes before and after.
+        target_baseline: Preferred baseline as a share of the median scene depth.
+        check_window: Depth maps of this many keyframes on each side check a point.
+        min_agree: Other depth maps that must agree with a point.
+        depth_tolerance: Relative depth difference counted as agreement.
+        voxel: Fusion voxel edge in model units; 0 picks about two pixel footprints.
+        use_gpu: Use COLMAP PatchMatch when pycolmap has CUDA.
+        block_size: SGBM matching block edge [px] (odd).
+
+    """
+
+    work_width: int = 1280
+    stride: int = 2
+    pair_window: int = 30
+    target_baseline: float = 0.25
+    check_window: int = 3
+    min_agree: int = 1
+    depth_tolerance: float = 0.01
+    voxel: float = 0.0
+    block_size: int = 5
+    use_gpu: bool = True
+
+
+@dataclass
+class DepthView:
+    """A keyframe's depth map at working resolution and the points it produced.
+
+    Attributes:
+        view: The registered view.
+        k: 3x3 pinhole intrinsics of the working resolution.
+        depth: HxW depth along the optical axis (inf where unknown).
+        points: Nx3 world points.
+        colors: Nx3 uint8 colours.
+
+    """
+
+    view: View
+    k: F64
+    depth: npt.NDArray[np.float32]
+    points: F64
+    colors: npt.NDArray[np.uint8]
+
+
+def _scaled(camera: CameraModel, scale: float) -> tuple[F64, F64, tuple[int, int]]:
+    """Intrinsics, distortion and size of ``camera`` scaled by ``scale`` (pixel centres kept)."""
+    k = camera.k.copy()
+    k[0, 0] *= scale
+    k[1, 1] *= scale
+    k[0, 2] = (k[0, 2] + 0.5) * scale - 0.5
+    k[1, 2] = (k[1, 2] + 0.5) * scale - 0.5
+    size = (round(camera.width * scale), round(camera.height * scale))
+    d = np.asarray(camera.d, dtype=np.float64)
+    return k, d if d.size else np.zeros(5), size
+
+
+def _depth_stats(view: View, model: SparseModel) -> tuple[float, float]:
+    """Median depth of the sparse points a view sees and the span of their inverse depth."""
+    rows = np.searchsorted(model.point_ids, view.point_ids)
+    pts = model.points[rows]
+    z = (pts @ view.rotation.T + view.translation)[:, 2]
+    z = z[z > 0]
+    if z.size < 10:
+        return float('nan'), float('nan')
+    near, far = np.percentile(z, [2, 98])
+    # The same margins as the disparity search range of _pair_depth.
+    return float(np.median(z)), float(1.3 / near - 0.7 / far)
+
+
+def _pick_partner(
+    i: int, views: list[View], stats: list[tuple[float, float]], options: DenseOptions
+) -> int | None:
+    """Index of the view to pair with ``views[i]``: closest to the target baseline ratio.
+
+    Baselines short enough for the scene's disparity range (with the margins of
+    :func:`_pair_depth`) to fit the matcher's 256 disparities are preferred: a deep scene (a low
+    camera looking across the ground) needs a short one. When no neighbour is that close the
+    best of the others is taken: the pile, nearer than the far ground, is then still in range.
+    """
+    depth, span = stats[i]
+    width = min(options.work_width, views[i].camera.width)
+    max_baseline = 240.0 / (views[i].camera.fx * width / views[i].camera.width * span)
+    best: dict[bool, tuple[float, int]] = {}
+    for j in range(max(0, i - options.pair_window), min(len(views), i + options.pair_window + 1)):
+        if j == i:
+            continue
+        baseline = float(np.linalg.norm(views[j].center - views[i].center))
+        ratio = baseline / depth
+        axes = float(views[i].rotation[2] @ views[j].rotation[2])
+        if not 0.02 <= ratio <= 0.6 or axes < np.cos(np.radians(40)):
+            continue
+        cost = abs(float(np.log(ratio / options.target_baseline)))
+        fits = baseline <= max_baseline
+        if fits not in best or cost < best[fits][0]:
+            best[fits] = (cost, j)
+    for fits in (True, False):
+        if fits in best:
+            return best[fits][1]
+    return None
+
+
+def _pair_depth(
+    image_dir: Path,
+    a: View,
+    b: View,
+    model: SparseModel,
+    options: DenseOptions,
+    cache: dict[str, npt.NDArray[np.uint8]],
+) -> DepthView | None:
+    """Depth map of view ``a`` from the rectified pair (a, b)."""
+
+    def load(view: View) -> npt.NDArray[np.uint8]:
+        if view.name not in cache:
+            bgr = cv2.imread(str(image_dir / view.name), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise OSError(f'cannot read {image_dir / view.name}')
+            cache[view.name] = np.asarray(bgr, dtype=np.uint8)
+        return cache[view.name]
+
+    k1, d1, size = _scaled(a.camera, min(1.0, options.work_width / a.camera.width))
+    k2, d2, _ = _scaled(b.camera, size[0] / b.camera.width)
+    rel_r = b.rotation @ a.rotation.T
+    rel_t = b.translation - rel_r @ a.translation
+    r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(
+        k1, d1, k2, d2, size, rel_r, rel_t, flags=cv2.CALIB_ZERO_DISPARITY, alpha=-1
+    )
+    vertical = abs(p2[1, 3]) > abs(p2[0, 3])
+    shift = float(p2[1, 3] if vertical else p2[0, 3])
+    f, cx, cy = float(p1[0, 0]), float(p1[0, 2]), float(p1[1, 2])
+
+    rows = np.searchsorted(model.point_ids, a.point_ids)
+    cam = model.points[rows] @ a.rotation.T + a.translation
+    z_rect = (cam @ r1.T)[:, 2]
+    z_rect = z_rect[z_rect > 0]
+    if z_rect.size < 10:
+        return None
+    disp_lo = abs(shift) / np.percentile(z_rect, 98) * 0.7
+    disp_hi = abs(shift) / np.percentile(z_rect, 2) * 1.3
+    min_disp = int(np.floor(disp_lo))
+    num_disp = int(np.clip(16 * np.ceil((disp_hi - min_disp) / 16), 16, 256))
+
+    rect = []
+    for view, k, d, r, p in ((a, k1, d1, r1, p1), (b, k2, d2, r2, p2)):
+        small = cv2.resize(load(view), size, interpolation=cv2.INTER_AREA)
+        mx, my = cv2.initUndistortRectifyMap(k, d, r, p, size, cv2.CV_32FC1)
+        rect.append(cv2.remap(small, mx, my, cv2.INTER_LINEAR))
+    colour = rect[0]
+    greys = [cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) for img in rect]
+    if vertical:
+        greys = [np.ascontiguousarray(g.T) for g in greys]
+    if shift > 0:
+        greys = [np.ascontiguousarray(g[:, ::-1]) for g in greys]
+    block = options.block_size
+    sgbm = cv2.StereoSGBM.create(
+        minDisparity=min_disp,
+        numDisparities=num_disp,
+        blockSize=block,
+        P1=8 * block * block,
+        P2=32 * block * block,
+        disp12MaxDiff=1,
+        uniquenessRatio=10,
+        speckleWindowSize=100,
+        speckleRange=2,
+        mode=cv2.STEREO_SGBM_MODE_SGBM,
+    )
+    disp = sgbm.compute(greys[0], greys[1]).astype(np.float32) / 16.0
+    if shift > 0:
+        disp = disp[:, ::-1]
+    if vertical:
+        disp = disp.T
+    valid = disp > max(min_disp, 0) + 0.5
+    mask = np.zeros_like(valid)
+    mask[:: options.stride, :: options.stride] = True
+    v, u = np.nonzero(valid & mask)
+    if u.size == 0:
+        return None
+    z = abs(shift) / disp[v, u]
+    p_rect = np.stack([(u - cx) * z / f, (v - cy) * z / f, z], axis=1)
+    p_cam = p_rect @ r1  # rectified -> camera a: R1^T applied to row vectors
+    world = (p_cam - a.translation) @ a.rotation
+    colors = colour[v, u][:, ::-1].astype(np.uint8)
+
+    # Depth map on the pinhole grid of view a (distortion ignored: every check uses this grid).
+    w, h = size
+    depth = np.full((h, w), np.inf, dtype=np.float32)
+    uv = p_cam @ k1.T
+    pu = np.round(uv[:, 0] / uv[:, 2]).astype(np.int64)
+    pv = np.round(uv[:, 1] / uv[:, 2]).astype(np.int64)
+    inside = (pu >= 0) & (pu < w) & (pv >= 0) & (pv < h) & (p_cam[:, 2] > 0)
+    order = np.argsort(-p_cam[inside, 2])
+    depth[pv[inside][order], pu[inside][order]] = p_cam[inside, 2][order]
+    if options.stride > 1:
+        # Fill the holes the stride leaves so a neighbour's check finds a value.
+        kernel = np.ones((options.stride + 1, options.stride + 1), np.uint8)
+        depth = np.asarray(cv2.erode(depth, kernel), dtype=np.float32)
+    return DepthView(view=a, k=k1, depth=depth, points=world, colors=colors)
+
+
+def _agreement(dv: DepthView, other: DepthView, tolerance: float) -> npt.NDArray[np.bool_]:
+    """Whether each point of ``dv`` matches the depth ``other`` sees along the same ray."""
+    cam = dv.points @ other.view.rotation.T + other.view.translation
+    h, w = other.depth.shape
+    z = cam[:, 2]
+    safe = np.where(z > 0, z, 1.0)
+    u = np.round(cam[:, 0] / safe * other.k[0, 0] + other.k[0, 2]).astype(np.int64)
+    v = np.round(cam[:, 1] / safe * other.k[1, 1] + other.k[1, 2]).astype(np.int64)
+    inside = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    ok = np.zeros(len(z), dtype=bool)
+    seen = other.depth[v[inside], u[inside]]
+    ok[inside] = np.abs(seen - z[inside]) < tolerance * z[inside]
+    return ok
+
+
+def dense_cloud(
+    image_dir: Path, model: SparseModel, order: list[str], options: DenseOptions
+) -> tuple[o3d.geometry.PointCloud, dict[str, Any]]:
+    """Fuse SGBM depth maps of the registered keyframes into an oriented, coloured cloud.
+
+    Args:
+        image_dir: The ``keyframes/`` folder.
+        model: The sparse model.
+        order: Keyframe file names in capture order (pairs are looked for among neighbours).
+        options: Tuning.
+
+    Returns:
+        The cloud (model units) and figures about the run.
+
+    """
+    views = [model.views[name] for name in order if name in model.views]
+    depth_stats = [_depth_stats(v, model) for v in views]
+    depths = [s[0] for s in depth_stats]
+    cache: dict[str, npt.NDArray[np.uint8]] = {}
+    maps: dict[int, DepthView | None] = {}
+    points, colors, centres = [], [], []
+    raw, made, w = 0, 0, options.check_window
+
+    def check(i: int) -> None:
+        """Keep the points of depth map ``i`` that neighbouring depth maps agree with."""
+        dv = maps[i]
+        if dv is None:
+            return
+        agree = np.zeros(len(dv.points), dtype=np.int64)
+        for k in range(i - w, i + w + 1):
+            other = maps.get(k)
+            if k != i and other is not None:
+                agree += _agreement(dv, other, options.depth_tolerance)
+        keep = agree >= options.min_agree
+        points.append(dv.points[keep])
+        colors.append(dv.colors[keep])
+        centres.append(np.broadcast_to(dv.view.center, (int(keep.sum()), 3)))
+
+    # Streamed: a depth map is checked once its last neighbour exists and dropped once no
+    # later map needs it, so memory holds 2 w + 1 maps whatever the number of keyframes.
+    for i in progress(range(len(views)), 'stereo', unit='view'):
+        j = _pick_partner(i, views, depth_stats, options) if np.isfinite(depths[i]) else None
+        dv = (
+            None if j is None else _pair_depth(image_dir, views[i], views[j], model, options, cache)
+        )
+        maps[i] = dv
+        if dv is not None:
+            raw += len(dv.points)
+            made += 1
+            f_work = float(dv.k[0, 0])
+        if i - w >= 0:
+            check(i - w)
+        maps.pop(i - 2 * w, None)
+        # Only neighbours' images are needed again.
+        for name in [n for n in cache if n not in {v.name for v in views[max(0, i - 5) : i + 6]}]:
+            del cache[name]
+    for i in range(max(0, len(views) - w), len(views)):
+        check(i)
+    if not points or sum(len(p) for p in points) < 100:
+        raise CaptureError(
+            'dense',
+            f'{made} of {len(views)} keyframes gave a depth map and '
+            'too few depths agreed between views',
+            'Record with more overlap between neighbouring views and a sideways motion',
+        )
+    pts = np.concatenate(points)
+    view_dirs = np.concatenate(centres) - pts
+    view_dirs /= np.linalg.norm(view_dirs, axis=1, keepdims=True)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd.colors = o3d.utility.Vector3dVector(np.concatenate(colors) / 255.0)
+    pcd.normals = o3d.utility.Vector3dVector(view_dirs)
+    voxel = options.voxel
+    if voxel <= 0:
+        voxel = options.stride * float(np.nanmedian(depths)) / f_work
+    fused = pcd.voxel_down_sample(voxel)
+    fused, _ = fused.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
+    _orient(fused, voxel)
+    stats = {
+        'method': 'sgbm-pairs',
+        'gpu': False,
+        'views': len(views),
+        'depth_maps': made,
+        'raw_points': raw,
+        'consistent_points': len(pts),
+        'points': len(fused.points),
+        'voxel': voxel,
+    }
+    return fused, stats
+
+
+def _orient(cloud: o3d.geometry.PointCloud, voxel: float) -> None:
+    """Estimate normals, pointing them to the side the (averaged) stored view directions face."""
+    towards = np.asarray(cloud.normals).copy()
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=4 * voxel, max_nn=30))
+    normals = np.asarray(cloud.normals)
+    flip = np.sum(normals * towards, axis=1) < 0
+    normals[flip] *= -1
+    cloud.normals = o3d.utility.Vector3dVector(normals)
+
+
+def _colmap_dense(image_dir: Path, sparse_dir: Path, out_dir: Path) -> o3d.geometry.PointCloud:
+    """COLMAP PatchMatch stereo and fusion (CUDA builds of pycolmap only)."""
+    mvs = out_dir / 'mvs'
+    pycolmap.undistort_images(mvs, sparse_dir, image_dir)
+    pycolmap.patch_match_stereo(mvs)
+    pycolmap.stereo_fusion(mvs / 'fused.ply', mvs, output_type='PLY')
+    cloud = o3d.io.read_point_cloud(mvs / 'fused.ply')
+    return cloud
+
+
+def run_dense(
+    image_dir: Path,
+    sparse_dir: Path,
+    model: SparseModel,
+    order: list[str],
+    out_dir: Path,
+    options: DenseOptions,
+) -> dict[str, Any]:
+    """Compute the dense cloud and write ``dense.ply`` and ``dense.json`` into ``out_dir``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if options.use_gpu and bool(getattr(pycolmap, 'has_cuda', False)):
+        cloud = _colmap_dense(image_dir, sparse_dir, out_dir)
+        stats: dict[str, Any] = {
+            'method': 'colmap-patchmatch',
+            'gpu': True,
+            'points': len(cloud.points),
+        }
+    else:
+        cloud, stats = dense_cloud(image_dir, model, order, options)
+    o3d.io.write_point_cloud(out_dir / 'dense.ply', cloud, write_ascii=False)
+    (out_dir / 'dense.json').write_text(json.dumps(stats, indent=1) + '\n')
+    return stats

@@ -1,0 +1,339 @@
+"""Keyframe selection from a camera stream: sharp frames that add parallax, written as accepted.
+
+The selector works on a small grey copy of each frame (about 320 px wide) so that it keeps up with a
+30 fps stream on one core: sharpness is the variance of the Laplacian compared with a running
+reference (the median of recent frames), parallax is the median displacement of corners tracked with
+pyramidal Lucas-Kanade from the last keyframe.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from ..camera import CameraModel, Frame
+
+__all__ = [
+    'Decision',
+    'KeyframeRecord',
+    'KeyframeSelector',
+    'KeyframeStore',
+    'SelectorOptions',
+    'camera_from_dict',
+    'camera_to_dict',
+]
+
+
+@dataclass(frozen=True)
+class SelectorOptions:
+    """Tuning of :class:`KeyframeSelector`.
+
+    Attributes:
+        work_width: Width [px] of the grey copy every test runs on.
+        blur_ratio: A frame is blurred when its sharpness is below this share of the reference.
+        reference_frames: Number of recent frames whose median sharpness is the reference.
+        min_parallax: Median corner displacement, as a share of the image width, that makes a
+            frame worth keeping.
+        min_tracked: When fewer than this share of the keyframe's corners are still tracked the
+            view has changed enough to add coverage, whatever the displacement.
+        min_spacing: Fewest frames between two keyframes.
+        max_spacing: A sharp frame is kept after this many frames even without parallax, so that
+            a slow pass still gets keyframes (0 disables).
+        max_keyframes: Upper bound on the number of keyframes.
+        max_corners: Corners tracked from each keyframe.
+
+    """
+
+    work_width: int = 320
+    blur_ratio: float = 0.6
+    reference_frames: int = 31
+    min_parallax: float = 0.06
+    min_tracked: float = 0.5
+    min_spacing: int = 2
+    max_spacing: int = 60
+    max_keyframes: int = 80
+    max_corners: int = 100
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the selector made of one frame.
+
+    Attributes:
+        accepted: Whether the frame became a keyframe.
+        reason: Why, in a word or two (``"first"``, ``"parallax"``, ``"coverage"``,
+            ``"spacing"``, ``"blurred"``, ``"too-close"``, ``"no-parallax"``, ``"limit"``).
+        sharpness: Variance of the Laplacian of the grey working copy.
+        reference: Running reference sharpness it was compared with.
+        parallax: Median tracked displacement as a share of the image width (NaN when unknown).
+        tracked: Share of the last keyframe's corners still tracked (NaN when unknown).
+
+    """
+
+    accepted: bool
+    reason: str
+    sharpness: float
+    reference: float
+    parallax: float
+    tracked: float
+
+
+def _grey_small(image: npt.NDArray[Any], width: int) -> npt.NDArray[np.uint8]:
+    """Grey copy of ``image`` at most ``width`` pixels wide (area interpolation)."""
+    h, w = image.shape[:2]
+    scale = min(1.0, width / w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    # Grey first: area-averaging one channel is cheaper than three (0.8 against 1.4 ms at 720p).
+    grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    small = cv2.resize(grey, size, interpolation=cv2.INTER_AREA) if scale < 1.0 else grey
+    if small.dtype != np.uint8:
+        small = cv2.convertScaleAbs(small, alpha=255.0 / max(1.0, float(small.max())))
+    return np.ascontiguousarray(small, dtype=np.uint8)
+
+
+class KeyframeSelector:
+    """Streaming keyframe selector: ``push`` a frame, learn whether it is a keyframe and why.
+
+    Args:
+        options: Thresholds and bounds.
+
+    """
+
+    def __init__(self, options: SelectorOptions | None = None) -> None:
+        self.options = options or SelectorOptions()
+        self._recent: deque[float] = deque(maxlen=self.options.reference_frames)
+        self._key_grey: npt.NDArray[np.uint8] | None = None
+        self._key_corners: npt.NDArray[np.float32] | None = None
+        self._since_key = 0
+        self.count = 0
+
+    def resume(self, last_keyframe: npt.NDArray[np.generic], count: int) -> None:
+        """Continue after a restart from the last keyframe written and the number already kept."""
+        self._set_keyframe(_grey_small(last_keyframe, self.options.work_width))
+        self.count = count
+
+    def _set_keyframe(self, grey: npt.NDArray[np.uint8]) -> None:
+        corners = cv2.goodFeaturesToTrack(
+            grey, maxCorners=self.options.max_corners, qualityLevel=0.01, minDistance=7
+        )
+        self._key_grey = grey
+        self._key_corners = None if corners is None else corners.astype(np.float32)
+        self._since_key = 0
+
+    def _track(self, grey: npt.NDArray[np.uint8]) -> tuple[float, float]:
+        """Median displacement (share of width) and tracked share of the keyframe's corners."""
+        if self._key_grey is None or self._key_corners is None or len(self._key_corners) < 8:
+            return float('nan'), float('nan')
+        if self._key_grey.shape != grey.shape:
+            return float('nan'), 0.0
+        moved, status, _ = cv2.calcOpticalFlowPyrLK(
+            self._key_grey,
+            grey,
+            self._key_corners,
+            np.empty_like(self._key_corners),
+            winSize=(13, 13),
+            maxLevel=3,
+        )
+        ok = status.ravel() == 1
+        if not np.any(ok):
+            return float('nan'), 0.0
+        shift = np.linalg.norm((moved - self._key_corners).reshape(-1, 2)[ok], axis=1)
+        return float(np.median(shift)) / grey.shape[1], float(np.mean(ok))
+
+    def push(self, image: npt.NDArray[np.generic]) -> Decision:
+        """Offer one frame (HxWx3 RGB or HxW grey); returns the decision.
+
+        A blurred frame never becomes a keyframe; a sharp one does when it is the first, when it
+        moved enough from the last keyframe (parallax), when most of the last keyframe's corners
+        left the view (coverage) or after ``max_spacing`` frames.
+        """
+        opt = self.options
+        grey = _grey_small(image, opt.work_width)
+        sharpness = float(cv2.Laplacian(grey, cv2.CV_32F).var())
+        reference = float(np.median(self._recent)) if self._recent else sharpness
+        self._recent.append(sharpness)
+        self._since_key += 1
+
+        def decide(accepted: bool, reason: str, parallax: float, tracked: float) -> Decision:
+            if accepted:
+                self._set_keyframe(grey)
+                self.count += 1
+            return Decision(accepted, reason, sharpness, reference, parallax, tracked)
+
+        nan = float('nan')
+        if sharpness < opt.blur_ratio * reference:
+            return decide(False, 'blurred', nan, nan)
+        if self.count >= opt.max_keyframes:
+            return decide(False, 'limit', nan, nan)
+        if self._key_grey is None:
+            return decide(True, 'first', nan, nan)
+        if self._since_key < opt.min_spacing:
+            return decide(False, 'too-close', nan, nan)
+        parallax, tracked = self._track(grey)
+        if parallax >= opt.min_parallax:
+            return decide(True, 'parallax', parallax, tracked)
+        if tracked < opt.min_tracked:
+            return decide(True, 'coverage', parallax, tracked)
+        if opt.max_spacing > 0 and self._since_key >= opt.max_spacing:
+            return decide(True, 'spacing', parallax, tracked)
+        return decide(False, 'no-parallax', parallax, tracked)
+
+
+def camera_to_dict(camera: CameraModel) -> dict[str, Any]:
+    """JSON form of a camera model (as in ``keyframes.jsonl``)."""
+    return {
+        'width': camera.width,
+        'height': camera.height,
+        'k': [float(v) for v in np.asarray(camera.k).ravel()],
+        'd': [float(v) for v in np.asarray(camera.d).ravel()],
+        'distortion_model': camera.distortion_model,
+        'frame_id': camera.frame_id,
+    }
+
+
+def camera_from_dict(data: dict[str, Any]) -> CameraModel:
+    """Inverse of :func:`camera_to_dict`."""
+    return CameraModel(
+        width=int(data['width']),
+        height=int(data['height']),
+        k=np.asarray(data['k'], dtype=np.float64).reshape(3, 3),
+        d=np.asarray(data.get('d', []), dtype=np.float64),
+        distortion_model=str(data.get('distortion_model', 'plumb_bob')),
+        frame_id=str(data.get('frame_id', 'camera_optical_frame')),
+    )
+
+
+@dataclass
+class KeyframeRecord:
+    """One line of ``keyframes.jsonl``.
+
+    Attributes:
+        file: PNG file name inside ``keyframes/``.
+        stamp_ns: Stamp of the frame [ns].
+        index: Index of the frame in its source.
+        camera: Camera model from CameraInfo, None when the source has none.
+        odometry: Odometry pose at the stamp (``position``, ``orientation_xyzw``, ``frame_id``,
+            ``child_frame_id``), None when there is no odometry.
+        reason: Why it was kept.
+        sharpness: Variance of the Laplacian on the working copy.
+
+    """
+
+    file: str
+    stamp_ns: int
+    index: int
+    camera: CameraModel | None = None
+    odometry: dict[str, Any] | None = None
+    reason: str = ''
+    sharpness: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> str:
+        """One JSON line."""
+        return json.dumps(
+            {
+                'file': self.file,
+                'stamp_ns': int(self.stamp_ns),
+                'index': int(self.index),
+                'camera': None if self.camera is None else camera_to_dict(self.camera),
+                'odometry': self.odometry,
+                'reason': self.reason,
+                'sharpness': round(self.sharpness, 3),
+                **self.extra,
+            }
+        )
+
+    @classmethod
+    def from_json(cls, line: str) -> KeyframeRecord:
+        """Parse one JSON line."""
+        data = json.loads(line)
+        cam = data.pop('camera', None)
+        known = {'file', 'stamp_ns', 'index', 'odometry', 'reason', 'sharpness'}
+        return cls(
+            file=str(data['file']),
+            stamp_ns=int(data['stamp_ns']),
+            index=int(data.get('index', 0)),
+            camera=None if cam is None else camera_from_dict(cam),
+            odometry=data.get('odometry'),
+            reason=str(data.get('reason', '')),
+            sharpness=float(data.get('sharpness', 0.0)),
+            extra={k: v for k, v in data.items() if k not in known},
+        )
+
+
+class KeyframeStore:
+    """The ``keyframes/`` folder: PNGs plus ``keyframes.jsonl``, appended as frames are accepted.
+
+    Each PNG is written to a temporary name and renamed before its line is appended (and flushed),
+    so after a crash every line names a complete image.
+
+    Args:
+        folder: The ``keyframes/`` folder (created if missing).
+
+    """
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.index_path = self.folder / 'keyframes.jsonl'
+        self.records: list[KeyframeRecord] = []
+        if self.index_path.exists():
+            for line in self.index_path.read_text().splitlines():
+                # A line cut short by a crash is dropped; its image is rewritten if seen again.
+                try:
+                    record = KeyframeRecord.from_json(line)
+                except (ValueError, KeyError):
+                    continue
+                if (self.folder / record.file).exists():
+                    self.records.append(record)
+
+    @property
+    def last_index(self) -> int:
+        """Source index of the last stored keyframe, -1 when empty."""
+        return self.records[-1].index if self.records else -1
+
+    def image(self, record: KeyframeRecord) -> npt.NDArray[np.uint8]:
+        """Read a stored keyframe back as RGB."""
+        bgr = cv2.imread(str(self.folder / record.file), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise OSError(f'cannot read {self.folder / record.file}')
+        return np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
+
+    def add(
+        self,
+        frame: Frame,
+        *,
+        odometry: dict[str, Any] | None = None,
+        reason: str = '',
+        sharpness: float = 0.0,
+    ) -> KeyframeRecord:
+        """Write ``frame`` as the next keyframe and append its line."""
+        name = f'kf_{len(self.records):05d}_{frame.index:06d}.png'
+        image = np.asarray(frame.image)
+        if image.ndim == 3:
+            image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        tmp = self.folder / f'.{name}.tmp.png'
+        if not cv2.imwrite(str(tmp), image):
+            raise OSError(f'cannot write {tmp}')
+        tmp.replace(self.folder / name)
+        record = KeyframeRecord(
+            file=name,
+            stamp_ns=frame.stamp_ns,
+            index=frame.index,
+            camera=frame.camera,
+            odometry=odometry,
+            reason=reason,
+            sharpness=sharpness,
+        )
+        with self.index_path.open('a') as out:
+            out.write(record.to_json() + '\n')
+            out.flush()
+        self.records.append(record)
+        return record

@@ -1,0 +1,371 @@
+"""The reconstruction stages chained over the work folder of ``docs/formats.md``.
+
+``keyframes/`` -> ``sparse/`` -> ``dense/`` -> ``mesh/``; every stage reads only what the previous
+ones wrote, so any stage can be rerun alone, and the keyframe stage resumes after a restart.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import open3d as o3d
+from scipy.spatial.transform import Rotation
+
+from ..errors import CaptureError, StockpileError
+from ..meshio import LabelledMesh, write_labelled_mesh
+from ..progress import progress
+from .dense import DenseOptions, run_dense
+from .ground import fit_ground, pile_mask, stockpile_transform
+from .keyframes import KeyframeSelector, KeyframeStore, SelectorOptions
+from .scale import (
+    ScaleEstimate,
+    TargetSpec,
+    combine,
+    detect_charuco,
+    scale_from_odometry,
+    scale_from_target,
+)
+from .sfm import SfmOptions, SparseModel, load_sparse, run_sfm
+from .sources import OdometryTrack, iter_frames, source_kind
+from .surface import PoissonOptions, poisson_surface
+
+__all__ = [
+    'STAGES',
+    'ReconOptions',
+    'WorkFolder',
+    'estimate_scale',
+    'reconstruct',
+    'run_dense_stage',
+    'run_keyframes',
+    'run_mesh_stage',
+    'run_sfm_stage',
+]
+
+STAGES = ('keyframes', 'sfm', 'dense', 'mesh')
+
+
+@dataclass(frozen=True)
+class ReconOptions:
+    """Everything the stages can be tuned with.
+
+    Attributes:
+        topic: Image topic of a bag (None: the one with most messages).
+        selector: Keyframe selection.
+        sfm: Structure-from-Motion.
+        dense: Dense stereo.
+        poisson: Surface.
+        target: The ChArUco board in view, None when there is none.
+        use_odometry: Scale from the bag's odometry when it has some.
+        odometry_tolerance: Odometry is not used for the scale when the keyframe path, scaled
+            onto it, differs from it by more than this share of its extent (rms).
+        crop_radius: Points farther (horizontally) from the pile centre than this multiple of
+            the pile's radius (95 % of what rises above a tenth of its height) are left out of the
+            surface,
+            and never farther than the farthest camera (0 keeps all): far ground seen at grazing
+            angles only costs Poisson resolution.
+
+    """
+
+    topic: str | None = None
+    selector: SelectorOptions = field(default_factory=SelectorOptions)
+    sfm: SfmOptions = field(default_factory=SfmOptions)
+    dense: DenseOptions = field(default_factory=DenseOptions)
+    poisson: PoissonOptions = field(default_factory=PoissonOptions)
+    target: TargetSpec | None = None
+    use_odometry: bool = True
+    crop_radius: float = 1.5
+    odometry_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class WorkFolder:
+    """Paths of the work folder."""
+
+    root: Path
+
+    @property
+    def keyframes(self) -> Path:
+        """PNG keyframes and ``keyframes.jsonl``."""
+        return self.root / 'keyframes'
+
+    @property
+    def sparse(self) -> Path:
+        """COLMAP model and ``sparse.json``."""
+        return self.root / 'sparse'
+
+    @property
+    def dense(self) -> Path:
+        """``dense.ply`` and ``dense.json``."""
+        return self.root / 'dense'
+
+    @property
+    def mesh(self) -> Path:
+        """``mesh.ply`` and ``mesh.json``."""
+        return self.root / 'mesh'
+
+
+def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+    """Select keyframes from ``source`` into ``work.keyframes``, resuming from what is there.
+
+    Returns:
+        Counts: frames seen, keyframes kept (in total and by this run), rejections by reason.
+
+    """
+    kind = source_kind(source)
+    selector_options = options.selector
+    if kind == 'photos':
+        # Photos were taken on purpose: keep every sharp one.
+        selector_options = replace(selector_options, min_spacing=1, min_parallax=0.0)
+    selector = KeyframeSelector(selector_options)
+    store = KeyframeStore(work.keyframes)
+    if store.records:
+        selector.resume(store.image(store.records[-1]), len(store.records))
+    before = len(store.records)
+    odometry: OdometryTrack | None = None
+    odometry_read = False
+    reasons: dict[str, int] = {}
+    seen = 0
+    for frame in progress(iter_frames(source, options.topic), 'keyframes', unit='frame'):
+        seen += 1
+        if frame.index <= store.last_index:
+            continue
+        if kind == 'bag' and options.use_odometry and not odometry_read:
+            # Read once, on the first frame handled (after a resume too): its frame names the
+            # camera, whose offset from the base comes from /tf_static and /tf.
+            frame_id = frame.camera.frame_id if frame.camera is not None else frame.frame_id
+            odometry = OdometryTrack.from_bag(source, frame_id)
+            odometry_read = True
+        decision = selector.push(frame.image)
+        reasons[decision.reason] = reasons.get(decision.reason, 0) + 1
+        if decision.accepted:
+            store.add(
+                frame,
+                odometry=None if odometry is None else odometry.at(frame.stamp_ns),
+                reason=decision.reason,
+                sharpness=decision.sharpness,
+            )
+    if not store.records:
+        raise CaptureError(
+            'keyframes',
+            f'no keyframe was kept out of {seen} frames (rejections: {reasons})',
+            'Check that the source holds sharp images of the pile',
+        )
+    return {
+        'frames': seen,
+        'keyframes': len(store.records),
+        'new': len(store.records) - before,
+        'decisions': reasons,
+    }
+
+
+def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+    """Structure-from-Motion of the stored keyframes into ``work.sparse``."""
+    store = KeyframeStore(work.keyframes)
+    return run_sfm(work.keyframes, store.records, work.sparse, options.sfm)
+
+
+def run_dense_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+    """Dense cloud of the registered keyframes into ``work.dense``."""
+    if not (work.sparse / 'sparse.json').exists():
+        raise StockpileError(f'{work.sparse}: no sparse model; run the sfm stage first')
+    store = KeyframeStore(work.keyframes)
+    model = load_sparse(work.sparse)
+    order = [r.file for r in store.records]
+    return run_dense(work.keyframes, work.sparse, model, order, work.dense, options.dense)
+
+
+def estimate_scale(
+    work: WorkFolder, model: SparseModel, options: ReconOptions
+) -> tuple[ScaleEstimate, dict[str, Any]]:
+    """Scale of the model from the target and/or odometry, with what each gave."""
+    store = KeyframeStore(work.keyframes)
+    details: dict[str, Any] = {}
+    target = None
+    if options.target is not None:
+        detections = {}
+        for record in store.records:
+            if record.file in model.views:
+                ids, px = detect_charuco(store.image(record), options.target)
+                if len(ids):
+                    detections[record.file] = (ids, px)
+        poses = {n: (v.camera, v.rotation, v.translation) for n, v in model.views.items()}
+        target = scale_from_target(detections, poses, options.target)
+        details['target'] = {
+            'views_with_corners': len(detections),
+            'estimate': None if target is None else target.__dict__,
+        }
+    odometry = None
+    if options.use_odometry:
+        centres: dict[int, npt.NDArray[np.float64]] = {}
+        stamps, positions = [], []
+        for record in store.records:
+            odo = record.odometry
+            if odo is None or record.file not in model.views:
+                continue
+            centres[record.stamp_ns] = model.views[record.file].center
+            stamps.append(record.stamp_ns)
+            positions.append(odo.get('camera_position', odo['position']))
+        if centres:
+            order = np.argsort(stamps)
+            odometry = scale_from_odometry(
+                centres, np.asarray(stamps, np.int64)[order], np.asarray(positions)[order]
+            )
+            details['odometry'] = {
+                'keyframes': len(centres),
+                'camera_offset_known': all(
+                    r.odometry is not None and 'camera_position' in r.odometry
+                    for r in store.records
+                    if r.odometry is not None
+                ),
+                'estimate': None if odometry is None else odometry.__dict__,
+            }
+            path = np.asarray(positions)
+            extent = float(np.linalg.norm(path.max(axis=0) - path.min(axis=0)))
+            if odometry is not None and odometry.rms_residual > options.odometry_tolerance * extent:
+                # The SfM path does not have the odometry's shape: one of them is wrong
+                # (misregistered keyframes, say, on repeating texture); its scale would be too.
+                details['odometry']['rejected'] = (
+                    f'SfM camera path differs from odometry by {odometry.rms_residual:.3f} m rms '
+                    f'over a {extent:.2f} m path'
+                )
+                odometry = None
+    return combine(target, odometry), details
+
+
+def _keyframe_poses(
+    model: SparseModel,
+    work: WorkFolder,
+    sim_scale: float,
+    sim_rot: npt.NDArray[np.float64],
+    sim_t: npt.NDArray[np.float64],
+) -> list[dict[str, Any]]:
+    out = []
+    for record in KeyframeStore(work.keyframes).records:
+        view = model.views.get(record.file)
+        if view is None:
+            continue
+        position = sim_scale * sim_rot @ view.center + sim_t
+        quat = Rotation.from_matrix(sim_rot @ view.rotation.T).as_quat()
+        out.append(
+            {
+                'stamp_ns': record.stamp_ns,
+                'file': record.file,
+                'position': [float(v) for v in position],
+                'orientation_xyzw': [float(v) for v in quat],
+            }
+        )
+    return out
+
+
+def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+    """Scale, ground alignment and Poisson surface into ``work.mesh``; returns ``mesh.json``."""
+    dense_path = work.dense / 'dense.ply'
+    if not dense_path.exists():
+        raise StockpileError(f'{dense_path}: missing; run the dense stage first')
+    model = load_sparse(work.sparse)
+    cloud = o3d.io.read_point_cloud(dense_path)
+    points = np.asarray(cloud.points)
+    scale, scale_details = estimate_scale(work, model, options)
+    views = list(model.views.values())
+    centres = np.array([v.center for v in views])
+    ups = np.array([-v.rotation[1] for v in views])
+    ground = fit_ground(points, centres, ups)
+    sim = stockpile_transform(ground, points, centres, scale.metres_per_unit)
+    normals = np.asarray(cloud.normals) @ sim.rotation.T
+    colors = np.asarray(cloud.colors) if cloud.has_colors() else None
+    local = sim.apply(points)
+    keep = np.ones(len(local), dtype=bool)
+    radius = None
+    if options.crop_radius > 0:
+        horizontal = np.linalg.norm(local[:, :2], axis=1)
+        radius = float(np.max(np.linalg.norm(sim.apply(centres)[:, :2], axis=1)))
+        above = pile_mask(local[:, 2])
+        if np.count_nonzero(above) > 100:
+            radius = min(radius, options.crop_radius * float(np.percentile(horizontal[above], 95)))
+        keep = horizontal <= radius
+    mesh, poisson = poisson_surface(
+        local[keep], normals[keep], None if colors is None else colors[keep], options.poisson
+    )
+    poisson['crop_radius'] = radius
+    poisson['points'] = int(keep.sum())
+    work.mesh.mkdir(parents=True, exist_ok=True)
+    vcol = np.asarray(mesh.vertex_colors)
+    write_labelled_mesh(
+        work.mesh / 'mesh.ply',
+        LabelledMesh(
+            vertices=np.asarray(mesh.vertices, dtype=np.float64),
+            faces=np.asarray(mesh.triangles, dtype=np.int64),
+            labels=np.zeros(len(mesh.triangles), dtype=np.int32),
+            colors=np.clip(np.round(vcol * 255), 0, 255).astype(np.uint8) if len(vcol) else None,
+        ),
+    )
+    info: dict[str, Any] = {
+        'schema': 'stockpile-mesh/1',
+        'frame_id': 'stockpile',
+        'units': 'm' if scale.method != 'none' else 'model',
+        'scale': {
+            'method': scale.method,
+            'metres_per_unit': scale.metres_per_unit,
+            'rel_uncertainty': scale.rel_uncertainty,
+        },
+        'scale_details': {**scale_details, 'note': scale.note},
+        'ground_plane_model': [float(v) for v in ground.plane],
+        'ground_inliers': len(ground.inliers),
+        'model_to_stockpile': {
+            'scale': sim.scale,
+            'rotation': [float(v) for v in sim.rotation.ravel()],
+            'translation': [float(v) for v in sim.translation],
+        },
+        'keyframes': _keyframe_poses(model, work, sim.scale, sim.rotation, sim.translation),
+        'poisson': poisson,
+    }
+    (work.mesh / 'mesh.json').write_text(json.dumps(info, indent=1) + '\n')
+    return info
+
+
+def reconstruct(
+    source: Path | None,
+    work_dir: Path,
+    options: ReconOptions,
+    stage: str = 'all',
+    report: Callable[[str, dict[str, Any], float], None] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Run one stage or all of them in order.
+
+    Args:
+        source: Bag, folder of photos or video (needed by the keyframe stage only).
+        work_dir: The work folder.
+        options: Tuning.
+        stage: One of :data:`STAGES` or ``"all"``.
+        report: Called after each stage with its name, result and duration [s].
+
+    Returns:
+        Each stage's result by name.
+
+    """
+    if stage != 'all' and stage not in STAGES:
+        raise StockpileError(f'unknown stage {stage!r}; choose from {", ".join(STAGES)}, all')
+    work = WorkFolder(work_dir)
+    results: dict[str, dict[str, Any]] = {}
+    for name in STAGES if stage == 'all' else (stage,):
+        start = time.perf_counter()
+        if name == 'keyframes':
+            if source is None:
+                raise StockpileError('the keyframes stage needs a SOURCE (bag, photos or video)')
+            results[name] = run_keyframes(source, work, options)
+        elif name == 'sfm':
+            results[name] = run_sfm_stage(work, options)
+        elif name == 'dense':
+            results[name] = run_dense_stage(work, options)
+        else:
+            results[name] = run_mesh_stage(work, options)
+        if report is not None:
+            report(name, results[name], time.perf_counter() - start)
+    return results

@@ -1,0 +1,363 @@
+"""Structure-from-Motion of the keyframes with pycolmap: features, matching, mapping, a report.
+
+Intrinsics from CameraInfo, when every keyframe carries the same one, are given to COLMAP as a fixed
+camera (PINHOLE, OPENCV, FULL_OPENCV or OPENCV_FISHEYE); otherwise one shared SIMPLE_RADIAL camera
+is self-calibrated. COLMAP puts the centre of the top-left pixel at (0.5, 0.5), ROS and OpenCV at
+(0, 0): principal points are shifted by half a pixel on the way in and out.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pycolmap
+
+from ..camera import CameraModel
+from ..errors import CaptureError
+from .keyframes import KeyframeRecord
+
+__all__ = ['SfmOptions', 'SparseModel', 'View', 'load_sparse', 'run_sfm']
+
+
+@dataclass(frozen=True)
+class SfmOptions:
+    """Tuning of :func:`run_sfm`.
+
+    Attributes:
+        max_image_size: Longest side [px] images are downscaled to for feature extraction
+            (keypoints are scaled back to full resolution by COLMAP).
+        max_features: SIFT features per image.
+        matcher: ``"sequential"`` (video: each keyframe against the next ``overlap`` ones) or
+            ``"exhaustive"`` (every pair; small sets or unordered photos).
+        overlap: Sequential matching window.
+        vocab_tree: Path of a COLMAP vocabulary tree; when given, sequential matching also
+            detects loops with it.
+        mapper: ``"incremental"`` or ``"global"`` (GLOMAP).
+        num_threads: Threads for every COLMAP step.
+        min_registered_fraction: Below this share of registered keyframes the capture fails.
+        min_features: Below this mean number of features per keyframe the capture is textureless.
+        use_camera_info: Use CameraInfo intrinsics when present (fixed camera).
+        min_triangulation_angle: Below this median (over points) of the widest angle between
+            the rays that see a point [deg], the motion is degenerate (a rotation on the spot).
+        log_level: COLMAP's log threshold (0 info, 1 warnings, 2 errors).
+
+    """
+
+    max_image_size: int = 1024
+    max_features: int = 4096
+    matcher: str = 'sequential'
+    overlap: int = 8
+    vocab_tree: str = ''
+    mapper: str = 'incremental'
+    num_threads: int = 2
+    min_registered_fraction: float = 0.5
+    min_features: int = 150
+    use_camera_info: bool = True
+    min_triangulation_angle: float = 8.0
+    log_level: int = 1
+
+
+@dataclass
+class View:
+    """One registered keyframe.
+
+    Attributes:
+        name: Image file name (as in ``keyframes/``).
+        camera: Intrinsics in the OpenCV convention (principal point of pixel centres at 0).
+        rotation: 3x3 world-to-camera rotation.
+        translation: World-to-camera translation.
+        point_ids: Ids of the 3D points it observes.
+
+    """
+
+    name: str
+    camera: CameraModel
+    rotation: npt.NDArray[np.float64]
+    translation: npt.NDArray[np.float64]
+    point_ids: npt.NDArray[np.int64]
+
+    @property
+    def center(self) -> npt.NDArray[np.float64]:
+        """Optical centre in model coordinates."""
+        return np.asarray(-self.rotation.T @ self.translation, dtype=np.float64)
+
+
+@dataclass
+class SparseModel:
+    """The registered views and sparse points of a COLMAP model, as numpy arrays.
+
+    Attributes:
+        views: Registered views by image name.
+        point_ids: Ids of the 3D points (row order of ``points``).
+        points: Nx3 positions in model coordinates.
+        colors: Nx3 uint8 colours.
+
+    """
+
+    views: dict[str, View]
+    point_ids: npt.NDArray[np.int64]
+    points: npt.NDArray[np.float64]
+    colors: npt.NDArray[np.uint8]
+
+
+_OPENCV_MODELS = {
+    # COLMAP model -> (parameter layout); parameters after the intrinsics are OpenCV's order.
+    'SIMPLE_PINHOLE': ('f', 'cx', 'cy'),
+    'PINHOLE': ('fx', 'fy', 'cx', 'cy'),
+    'SIMPLE_RADIAL': ('f', 'cx', 'cy', 'k1'),
+    'RADIAL': ('f', 'cx', 'cy', 'k1', 'k2'),
+    'OPENCV': ('fx', 'fy', 'cx', 'cy', 'k1', 'k2', 'p1', 'p2'),
+    'FULL_OPENCV': ('fx', 'fy', 'cx', 'cy', 'k1', 'k2', 'p1', 'p2', 'k3', 'k4', 'k5', 'k6'),
+    'OPENCV_FISHEYE': ('fx', 'fy', 'cx', 'cy', 'k1', 'k2', 'k3', 'k4'),
+}
+
+
+def _colmap_camera(camera: CameraModel) -> tuple[str, list[float]]:
+    """COLMAP model name and parameters for a CameraInfo model."""
+    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx + 0.5, camera.cy + 0.5
+    d = [float(v) for v in np.asarray(camera.d).ravel()]
+    if camera.distortion_model == 'equidistant' and any(d):
+        return 'OPENCV_FISHEYE', [fx, fy, cx, cy, *(d + [0.0] * 4)[:4]]
+    if not any(d):
+        return 'PINHOLE', [fx, fy, cx, cy]
+    if len(d) <= 4 or (len(d) == 5 and d[4] == 0.0):
+        return 'OPENCV', [fx, fy, cx, cy, *(d + [0.0] * 4)[:4]]
+    d8 = (d + [0.0] * 8)[:8]
+    return 'FULL_OPENCV', [fx, fy, cx, cy, *d8[:4], d8[4], d8[5], d8[6], d8[7]]
+
+
+def _opencv_camera(camera: pycolmap.Camera) -> CameraModel:
+    """OpenCV-convention camera model of a COLMAP camera."""
+    name = str(camera.model_name)
+    if name not in _OPENCV_MODELS:
+        raise ValueError(f'COLMAP camera model {name} is not supported')
+    values = dict(zip(_OPENCV_MODELS[name], (float(v) for v in camera.params), strict=True))
+    fx = values.get('fx', values.get('f', 0.0))
+    fy = values.get('fy', values.get('f', 0.0))
+    k = np.array(
+        [[fx, 0.0, values['cx'] - 0.5], [0.0, fy, values['cy'] - 0.5], [0.0, 0.0, 1.0]],
+    )
+    if name == 'OPENCV_FISHEYE':
+        d = [values[key] for key in ('k1', 'k2', 'k3', 'k4')]
+        return CameraModel(int(camera.width), int(camera.height), k, np.array(d), 'equidistant')
+    keys = ('k1', 'k2', 'p1', 'p2', 'k3', 'k4', 'k5', 'k6')
+    d = [values.get(key, 0.0) for key in keys]
+    while d and d[-1] == 0.0 and len(d) > 5:
+        d.pop()
+    model = 'rational_polynomial' if len(d) == 8 else 'plumb_bob'
+    if not any(d):
+        d = []
+    return CameraModel(int(camera.width), int(camera.height), k, np.array(d), model)
+
+
+def _shared_camera(records: list[KeyframeRecord]) -> CameraModel | None:
+    """Return the CameraInfo model all keyframes share, None when any lacks it or they differ."""
+    first = records[0].camera if records else None
+    if first is None:
+        return None
+    for record in records[1:]:
+        cam = record.camera
+        if (
+            cam is None
+            or (cam.width, cam.height) != (first.width, first.height)
+            or not np.allclose(cam.k, first.k)
+            or not np.array_equal(np.asarray(cam.d), np.asarray(first.d))
+        ):
+            return None
+    return first
+
+
+def _feature_counts(database: Path) -> list[int]:
+    """Count the keypoints of every image in a COLMAP database."""
+    db = pycolmap.Database.open(str(database))
+    try:
+        return [int(db.num_keypoints_for_image(img.image_id)) for img in db.read_all_images()]
+    finally:
+        db.close()
+
+
+def _verified_pairs(database: Path) -> int:
+    db = pycolmap.Database.open(str(database))
+    try:
+        return int(db.num_verified_image_pairs())
+    finally:
+        db.close()
+
+
+def _median_triangulation_angle(rec: pycolmap.Reconstruction) -> float:
+    """Median over 3D points of the widest angle between two rays that see the point [deg]."""
+    centres = {i: np.asarray(rec.image(i).projection_center()) for i in rec.reg_image_ids()}
+    angles = []
+    for point in rec.points3D.values():
+        rays = np.array([centres[e.image_id] - point.xyz for e in point.track.elements])
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        angles.append(float(np.degrees(np.arccos(np.clip((rays @ rays.T).min(), -1.0, 1.0)))))
+    return float(np.median(angles)) if angles else 0.0
+
+
+def run_sfm(
+    image_dir: Path, records: list[KeyframeRecord], out_dir: Path, options: SfmOptions
+) -> dict[str, Any]:
+    """Reconstruct the keyframes; writes the model and ``sparse.json`` into ``out_dir``.
+
+    Args:
+        image_dir: The ``keyframes/`` folder.
+        records: The keyframes, in capture order.
+        out_dir: The ``sparse/`` folder (its previous content is replaced).
+        options: Tuning.
+
+    Returns:
+        The content of ``sparse.json``.
+
+    Raises:
+        CaptureError: Too few keyframes, too few features, no initial pair or too few
+            registered keyframes; the keyframes on disk are left as they are.
+
+    """
+    names = [r.file for r in records]
+    advice_more = (
+        'Record again moving the camera sideways along the pile (not only rotating), slowly '
+        'enough for sharp frames, with the pile filling most of the view'
+    )
+    if len(names) < 3:
+        raise CaptureError(
+            'sfm', f'only {len(names)} keyframe(s) were kept, at least 3 are needed', advice_more
+        )
+    pycolmap.logging.minloglevel = options.log_level
+    if out_dir.exists():
+        shutil.rmtree(out_dir)
+    out_dir.mkdir(parents=True)
+    database = out_dir / 'database.db'
+
+    reader = pycolmap.ImageReaderOptions()
+    camera = _shared_camera(records) if options.use_camera_info else None
+    fixed = camera is not None
+    if camera is not None:
+        model, params = _colmap_camera(camera)
+        reader.camera_model = model
+        reader.camera_params = ','.join(f'{p:.10g}' for p in params)
+    else:
+        reader.camera_model = 'SIMPLE_RADIAL'
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.max_image_size = options.max_image_size
+    extraction.num_threads = options.num_threads
+    extraction.sift.max_num_features = options.max_features
+    pycolmap.extract_features(
+        database,
+        image_dir,
+        image_names=names,
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader,
+        extraction_options=extraction,
+        device=pycolmap.Device.cpu,
+    )
+    counts = _feature_counts(database)
+    mean_features = float(np.mean(counts)) if counts else 0.0
+    if mean_features < options.min_features:
+        raise CaptureError(
+            'sfm',
+            f'the keyframes have {mean_features:.0f} image features on average '
+            f'(at least {options.min_features} needed): the views are blurred or textureless',
+            'Check focus, exposure and motion blur; film textured surfaces (the pile), not sky or '
+            'a blank wall',
+        )
+
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = options.num_threads
+    if options.matcher == 'exhaustive':
+        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+    elif options.matcher == 'sequential':
+        pairing = pycolmap.SequentialPairingOptions()
+        pairing.overlap = options.overlap
+        pairing.quadratic_overlap = True
+        if options.vocab_tree:
+            pairing.loop_detection = True
+            pairing.vocab_tree_path = options.vocab_tree
+        pycolmap.match_sequential(
+            database, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu
+        )
+    else:
+        raise ValueError(f'unknown matcher {options.matcher!r}')
+
+    models_dir = out_dir / 'models'
+    models_dir.mkdir()
+    if options.mapper == 'incremental':
+        mapping = pycolmap.IncrementalPipelineOptions()
+        mapping.num_threads = options.num_threads
+        mapping.random_seed = 0
+        if fixed:
+            mapping.ba_refine_focal_length = False
+            mapping.ba_refine_principal_point = False
+            mapping.ba_refine_extra_params = False
+        models = pycolmap.incremental_mapping(database, image_dir, models_dir, options=mapping)
+    elif options.mapper == 'global':
+        glob = pycolmap.GlobalPipelineOptions()
+        glob.num_threads = options.num_threads
+        glob.random_seed = 0
+        models = pycolmap.global_mapping(database, image_dir, models_dir, options=glob)
+    else:
+        raise ValueError(f'unknown mapper {options.mapper!r}')
+    shutil.rmtree(models_dir, ignore_errors=True)
+
+    if not models:
+        pairs = _verified_pairs(database)
+        raise CaptureError(
+            'sfm',
+            f'no initial pair of keyframes could be reconstructed ({pairs} geometrically verified '
+            f'pairs among {len(names)} keyframes): too little overlap, or pure rotation',
+            advice_more,
+        )
+    best = max(models.values(), key=lambda rec: rec.num_reg_images())
+    registered = int(best.num_reg_images())
+    report: dict[str, Any] = {
+        'registered': registered,
+        'total': len(names),
+        'registered_fraction': registered / len(names),
+        'models': len(models),
+        'points': int(best.num_points3D()),
+        'mean_reprojection_error_px': float(best.compute_mean_reprojection_error()),
+        'mean_features': mean_features,
+        'camera': 'fixed from CameraInfo' if fixed else 'self-calibrated SIMPLE_RADIAL',
+        'matcher': options.matcher,
+        'mapper': options.mapper,
+        'unregistered': sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
+    }
+    report['median_triangulation_angle_deg'] = _median_triangulation_angle(best)
+    best.write(out_dir)
+    (out_dir / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
+    if report['median_triangulation_angle_deg'] < options.min_triangulation_angle:
+        raise CaptureError(
+            'sfm',
+            'the keyframes see the scene from nearly one place (median triangulation angle '
+            f'{report["median_triangulation_angle_deg"]:.1f} degrees): depth cannot be measured '
+            'from a rotation on the spot',
+            advice_more,
+        )
+    return report
+
+
+def load_sparse(sparse_dir: Path) -> SparseModel:
+    """Read the COLMAP model written by :func:`run_sfm` into numpy arrays."""
+    rec = pycolmap.Reconstruction(str(sparse_dir))
+    views: dict[str, View] = {}
+    for image_id in rec.reg_image_ids():
+        image = rec.image(image_id)
+        pose = image.cam_from_world()
+        ids = [p.point3D_id for p in image.points2D if p.has_point3D()]
+        views[image.name] = View(
+            name=image.name,
+            camera=_opencv_camera(rec.camera(image.camera_id)),
+            rotation=np.asarray(pose.rotation.matrix(), dtype=np.float64),
+            translation=np.asarray(pose.translation, dtype=np.float64).reshape(3),
+            point_ids=np.asarray(ids, dtype=np.int64),
+        )
+    pids = np.asarray(sorted(rec.points3D.keys()), dtype=np.int64)
+    points = np.array([rec.points3D[int(i)].xyz for i in pids], dtype=np.float64).reshape(-1, 3)
+    colors = np.array([rec.points3D[int(i)].color for i in pids], dtype=np.uint8).reshape(-1, 3)
+    return SparseModel(views=views, point_ids=pids, points=points, colors=colors)

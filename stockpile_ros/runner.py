@@ -1,0 +1,155 @@
+"""Reconstruction and segmentation runs that end in a status, never in an exception.
+
+Both the reconstruction node's worker and ``stockpile replay`` call these: a capture that cannot be
+reconstructed becomes an :class:`Outcome` with a reason and advice for the operator.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import CaptureError, StockpileError
+from .meshio import read_labelled_mesh
+from .recon.keyframes import KeyframeStore
+from .recon.pipeline import WorkFolder, reconstruct
+from .segment.gradation import load_class_table
+from .segment.pipeline import Analysis, analyse_mesh
+from .segment.report import write_result_folder
+from .settings import Settings
+
+__all__ = ['MIN_KEYFRAMES', 'RECON_STAGES', 'Outcome', 'run_reconstruction', 'run_segmentation']
+
+RECON_STAGES = ('sfm', 'dense', 'mesh')
+
+MIN_KEYFRAMES = 3
+"""Fewest keyframes worth a Structure-from-Motion attempt (two views and one to check them)."""
+
+# What a capture or a pycolmap/open3d step raises when the data cannot be processed.
+_FAILURES = (StockpileError, RuntimeError, ValueError, OSError)
+
+
+@dataclass
+class Outcome:
+    """How a run ended.
+
+    Attributes:
+        ok: Whether every stage succeeded.
+        stage: The stage that failed, or the last one run.
+        reason: What went wrong ('' when ok).
+        advice: What the operator should do ('' when ok).
+        results: Each finished stage's result dict by name.
+        seconds: Each finished stage's duration by name.
+        analysis: The segmentation analysis (segmentation runs only).
+
+    """
+
+    ok: bool
+    stage: str
+    reason: str = ''
+    advice: str = ''
+    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    analysis: Analysis | None = None
+
+
+def _failure(stage: str, exc: Exception, outcome: Outcome) -> Outcome:
+    outcome.ok = False
+    outcome.stage = stage
+    if isinstance(exc, CaptureError):
+        outcome.reason, outcome.advice = exc.reason, exc.advice
+    elif isinstance(exc, StockpileError):
+        outcome.reason = str(exc)
+        outcome.advice = 'Check the capture and the parameters, then trigger again'
+    else:
+        outcome.reason = f'{type(exc).__name__}: {exc}'
+        outcome.advice = 'Unexpected failure of the stage; report it with the work folder'
+    return outcome
+
+
+def run_reconstruction(
+    settings: Settings,
+    on_stage: Callable[[str, int, float | None], None] | None = None,
+) -> Outcome:
+    """Run the sfm, dense and mesh stages over the work folder's keyframes.
+
+    Args:
+        settings: Options and work folder.
+        on_stage: Called with the stage name, its index in :data:`RECON_STAGES` and, once it is
+            done, its duration [s] (None when it starts).
+
+    Returns:
+        The outcome; ``results`` holds ``sparse.json``-like, ``dense.json`` and ``mesh.json``
+        dicts of the stages that finished.
+
+    """
+    outcome = Outcome(ok=True, stage=RECON_STAGES[0])
+    held = len(KeyframeStore(WorkFolder(settings.work_dir).keyframes).records)
+    if held < MIN_KEYFRAMES:
+        too_few = CaptureError(
+            'keyframes',
+            f'only {held} keyframe{"" if held == 1 else "s"} held, at least {MIN_KEYFRAMES} needed',
+            'Move the camera around the pile (sharp frames, steady motion) before triggering',
+        )
+        return _failure('keyframes', too_few, outcome)
+    for index, stage in enumerate(RECON_STAGES):
+        if on_stage is not None:
+            on_stage(stage, index, None)
+        start = time.perf_counter()
+        try:
+            result = reconstruct(None, settings.work_dir, settings.recon, stage)[stage]
+        except _FAILURES as exc:
+            return _failure(stage, exc, outcome)
+        outcome.stage = stage
+        outcome.results[stage] = result
+        outcome.seconds[stage] = time.perf_counter() - start
+        if on_stage is not None:
+            on_stage(stage, index, outcome.seconds[stage])
+    return outcome
+
+
+def run_segmentation(settings: Settings, result_dir: str | Path | None = None) -> Outcome:
+    """Segment the work folder's mesh, measure the rocks and write the result folder.
+
+    Args:
+        settings: Parameters, class to check and work folder.
+        result_dir: Result folder (``<work_dir>/result`` by default).
+
+    Returns:
+        The outcome, ``analysis`` set and ``results['segment']`` the report dict when ok.
+
+    """
+    outcome = Outcome(ok=True, stage='segment')
+    mesh_dir = WorkFolder(settings.work_dir).mesh
+    out = Path(result_dir) if result_dir is not None else settings.work_dir / 'result'
+    start = time.perf_counter()
+    try:
+        mesh = read_labelled_mesh(mesh_dir / 'mesh.ply')
+        info = json.loads((mesh_dir / 'mesh.json').read_text())
+        spec = None
+        if settings.spec_class:
+            table = load_class_table(settings.class_table)
+            if settings.spec_class not in table['classes']:
+                known = ', '.join(table['classes'])
+                raise StockpileError(
+                    f'unknown class {settings.spec_class!r}; the class table has {known}'
+                )
+            spec = table['classes'][settings.spec_class]
+        analysis = analyse_mesh(
+            mesh.vertices, mesh.faces, mesh.colors,
+            seg_params=settings.segment, measure_params=settings.measure,
+            spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
+        )  # fmt: skip
+        write_result_folder(out, analysis, spec)
+    except (json.JSONDecodeError, KeyError) as exc:
+        return _failure('segment', StockpileError(f'{mesh_dir}: unreadable mesh: {exc}'), outcome)
+    except _FAILURES as exc:
+        return _failure('segment', exc, outcome)
+    outcome.analysis = analysis
+    outcome.results['segment'] = analysis.report
+    outcome.seconds['segment'] = time.perf_counter() - start
+    return outcome

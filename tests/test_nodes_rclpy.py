@@ -1,0 +1,96 @@
+"""The rclpy node layer, run where ROS 2 Jazzy and the stockpile_msgs package are installed."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+rclpy = pytest.importorskip(
+    'rclpy',
+    reason='rclpy (ROS 2 Jazzy) is not installed here: the node layer is exercised on the cart',
+)
+pytest.importorskip('stockpile_msgs', reason='the stockpile_msgs interface package is not built')
+
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from stockpile_ros import topics  # noqa: E402
+from stockpile_ros.nodes.common import RclpyFactory  # noqa: E402
+from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
+from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
+from stockpile_ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
+from stockpile_ros.settings import settings_for  # noqa: E402
+
+
+def _call(client: Any, timeout: float = 5.0) -> Any:
+    """Call a service and wait for the answer (the executor spins in another thread)."""
+    future = client.call_async(Trigger.Request())
+    deadline = time.monotonic() + timeout
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert future.done(), 'no answer from the service'
+    return future.result()
+
+
+@pytest.fixture
+def ros() -> Iterator[None]:
+    rclpy.init()
+    try:
+        yield
+    finally:
+        rclpy.try_shutdown()
+
+
+def test_factory_builds_messages_rclpy_accepts() -> None:
+    f = RclpyFactory()
+    cloud = pointcloud2(f, [[0.0, 1.0, 2.0]], [[1, 2, 3]], [4], 5, 'stockpile')
+    assert cloud.width == 1 and len(cloud.data) == cloud.point_step
+    diag = diagnostic_array(f, 5, [{'name': 'a', 'level': 'WARN', 'message': 'm'}])
+    assert diag.status[0].level == diag.status[0].WARN
+
+
+def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
+    node = KeyframeNode(parameter_overrides=[Parameter('work_dir', value=str(tmp_path))])
+    try:
+        names = {s.name for s in settings_for('keyframes')}
+        assert all(node.has_parameter(name) for name in names)
+        descriptor = node.describe_parameter('selector.min_parallax')
+        assert descriptor.floating_point_range[0].to_value == 1.0
+        result = node.set_parameters([Parameter('selector.min_parallax', value=5.0)])[0]
+        assert not result.successful
+        assert not node.set_parameters([Parameter('work_dir', value='/x')])[0].successful
+    finally:
+        node.destroy_node()
+
+
+def test_second_trigger_while_busy_is_refused(ros: None, tmp_path: Path) -> None:
+    node = ReconstructionNode(parameter_overrides=[Parameter('work_dir', value=str(tmp_path))])
+    release = threading.Event()
+    node.run = lambda stamp_ns: release.wait(5)  # type: ignore[method-assign]
+    client_node = rclpy.create_node('stockpile_test_client')
+    executor = MultiThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(client_node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        client = client_node.create_client(Trigger, topics.RECONSTRUCT_SERVICE)
+        assert client.wait_for_service(timeout_sec=5)
+        first = _call(client)
+        second = _call(client)
+        assert first.success and not second.success
+        assert 'already running' in second.message
+        release.set()
+        time.sleep(0.2)
+        assert _call(client).success
+    finally:
+        release.set()
+        executor.shutdown()
+        node.destroy_node()
+        client_node.destroy_node()

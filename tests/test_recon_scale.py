@@ -1,0 +1,154 @@
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from stockpile_ros.camera import CameraModel
+from stockpile_ros.errors import StockpileError
+from stockpile_ros.recon.scale import (
+    ScaleEstimate,
+    TargetSpec,
+    combine,
+    detect_charuco,
+    scale_from_odometry,
+    scale_from_target,
+    umeyama,
+)
+
+SPEC = TargetSpec(5, 4, 0.1, 0.075, 'DICT_4X4_50')
+
+
+def _look_at(centre: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    z = target - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    rot = np.stack([x, np.cross(z, x), z])
+    return rot, -rot @ centre
+
+
+def _board_view(cam: CameraModel, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """Image of the board lying face up on z = 0 seen by a pinhole camera.
+
+    OpenCV boards face -z of their frame: board (x, y) lies at world (x, -y, 0).
+    """
+    ppm = 2000.0
+    size = (
+        round(SPEC.squares_x * SPEC.square_length * ppm),
+        round(SPEC.squares_y * SPEC.square_length * ppm),
+    )
+    board = SPEC.board().generateImage(size, marginSize=0)
+    pixel_to_board = np.array([[1 / ppm, 0, 0.5 / ppm], [0, 1 / ppm, 0.5 / ppm], [0, 0, 1]])
+    h = cam.k @ np.column_stack([rot[:, 0], -rot[:, 1], trans]) @ pixel_to_board
+    img = cv2.warpPerspective(
+        board, h, (cam.width, cam.height), flags=cv2.INTER_AREA, borderValue=160
+    )
+    return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+
+
+def test_target_scale_from_known_cameras() -> None:
+    cam = CameraModel.from_fov(960, 540, 60.0)
+    centre_of_board = np.array([0.25, -0.2, 0.0])
+    s_true = 0.37  # metres per model unit
+    detections, poses = {}, {}
+    for i, angle in enumerate(np.linspace(-0.5, 0.5, 5)):
+        c = centre_of_board + np.array([np.sin(angle), -np.cos(angle), 0.9])
+        rot, trans = _look_at(c, centre_of_board)
+        ids, px = detect_charuco(_board_view(cam, rot, trans), SPEC)
+        assert len(ids) >= 10
+        detections[f'v{i}'] = (ids, px)
+        # The model is the world shrunk by s_true: same rotations, translations divided by it.
+        poses[f'v{i}'] = (cam, rot, trans / s_true)
+    est = scale_from_target(detections, poses, SPEC)
+    assert est is not None and est.method == 'target'
+    assert est.metres_per_unit == pytest.approx(s_true, rel=0.003)
+    assert est.rel_uncertainty is not None and 0 < est.rel_uncertainty < 0.01
+    assert est.points == (SPEC.squares_x - 1) * (SPEC.squares_y - 1)
+
+
+def test_target_not_seen_gives_none() -> None:
+    cam = CameraModel.from_fov(640, 480, 60.0)
+    blank = np.full((480, 640, 3), 128, np.uint8)
+    ids, _ = detect_charuco(blank, SPEC)
+    assert len(ids) == 0
+    poses = {'a': (cam, np.eye(3), np.zeros(3))}
+    assert scale_from_target({'a': (ids, np.zeros((0, 2)))}, poses, SPEC) is None
+
+
+def test_target_spec_parse() -> None:
+    assert TargetSpec.parse('charuco:5x4:0.1:0.075:DICT_4X4_50') == SPEC
+    assert TargetSpec.parse('charuco:5x4:0.1:0.075').dictionary == 'DICT_4X4_50'
+    for bad in (
+        'aruco:5x4:0.1:0.075',
+        'charuco:5x4:0.1',
+        'charuco:5x4:0.1:0.2',
+        'charuco:5x4:0.1:0.075:DICT_NOPE',
+    ):
+        with pytest.raises(StockpileError):
+            TargetSpec.parse(bad)
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def test_umeyama_recovers_similarity() -> None:
+    rng = np.random.default_rng(0)
+    src = rng.normal(size=(20, 3))
+    rot = _rotation(rng)
+    dst = 2.5 * src @ rot.T + [1.0, 2.0, 3.0]
+    sim = umeyama(src, dst)
+    assert sim.scale == pytest.approx(2.5)
+    np.testing.assert_allclose(sim.rotation, rot, atol=1e-9)
+    np.testing.assert_allclose(sim.apply(src), dst, atol=1e-9)
+
+
+@pytest.mark.parametrize('noise', [0.005, 0.02])
+def test_odometry_scale_with_noise(noise: float) -> None:
+    rng = np.random.default_rng(1)
+    # A cart path: 4 m arc at 1.2 m height, keyframes every 0.5 s, odometry at 30 Hz.
+    t_odom = np.arange(0, 10, 1 / 30)
+    path = np.column_stack(
+        [2.2 * np.cos(t_odom / 6), 2.2 * np.sin(t_odom / 6), np.full_like(t_odom, 1.2)]
+    )
+    odom = path + rng.normal(0, noise, path.shape)
+    stamps = (t_odom * 1e9).astype(np.int64)
+    s_true, rot = 0.4, _rotation(rng)
+    key_idx = np.arange(5, len(t_odom) - 5, 15)
+    centres = {
+        int(stamps[i] + 10_000_000): (path[i] - [0.5, 0.0, 0.0]) @ rot / s_true for i in key_idx
+    }
+    est = scale_from_odometry(centres, stamps, odom)
+    assert est is not None and est.method == 'odometry'
+    assert est.rel_uncertainty is not None
+    err = abs(est.metres_per_unit / s_true - 1)
+    # Keyframe stamps are 10 ms after odometry samples: interpolation error stays small.
+    assert err < 4 * est.rel_uncertainty + 0.002
+    assert est.rel_uncertainty < 3 * noise
+
+
+def test_odometry_needs_a_path() -> None:
+    stamps = np.arange(10, dtype=np.int64) * 100_000_000
+    still = np.zeros((10, 3))
+    centres = {int(s): np.random.default_rng(0).normal(size=3) for s in stamps}
+    assert scale_from_odometry(centres, stamps, still) is None
+
+
+def test_combine() -> None:
+    none = combine(None, None)
+    assert none.method == 'none' and none.metres_per_unit == 1.0 and none.rel_uncertainty is None
+    t = ScaleEstimate('target', 1.00, 0.001, 12)
+    o = ScaleEstimate('odometry', 1.03, 0.01, 20)
+    assert combine(t, None) is t and combine(None, o) is o
+    both = combine(t, o)
+    assert both.method == 'target+odometry'
+    assert 1.0 < both.metres_per_unit < 1.001
+    assert both.rel_uncertainty is not None and both.rel_uncertainty < 0.001
+    assert both.note == ''
+    # A 3 % disagreement far outside both spreads becomes the uncertainty, with a note.
+    sure = combine(t, ScaleEstimate('odometry', 1.03, 0.001, 20))
+    assert sure.rel_uncertainty is not None and sure.rel_uncertainty > 0.014
+    assert 'disagree' in sure.note

@@ -1,0 +1,134 @@
+"""`stockpile replay` over hand-made and simulated bags: outputs, diagnostics, failures."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from stockpile_ros import messages as m
+from stockpile_ros import topics
+from stockpile_ros.bagio.writer import BagWriter
+from stockpile_ros.camera import CameraModel
+from stockpile_ros.cli import main
+from stockpile_ros.replay import replay
+from stockpile_ros.settings import build_settings
+
+CAMERA = CameraModel(64, 48, np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]]), np.zeros(5),
+                     'plumb_bob', 'camera_optical')  # fmt: skip
+SECOND = 1_000_000_000
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'stockpile.yaml'
+
+
+def _image(i: int) -> np.ndarray:
+    rng = np.random.default_rng(i)
+    return (rng.random((48, 64, 3)) * 255).astype(np.uint8)
+
+
+def _bag(path: Path, frames: int, *, info: bool = True, encoding: str = 'rgb8',
+         triggers: tuple[int, ...] = ()) -> Path:  # fmt: skip
+    with BagWriter(path) as bag:
+        f = bag.factory
+        for i in range(frames):
+            stamp = SECOND + i * SECOND // 10
+            msg = m.image(f, _image(i), stamp, 'camera_optical')
+            msg.encoding = encoding
+            bag.write('/camera/image_raw', msg, stamp)
+            if info:
+                bag.write('/camera/camera_info', m.camera_info(f, CAMERA, stamp), stamp)
+            if i in triggers:
+                bag.write('/' + topics.TRIGGER, f.cls('std_msgs/msg/Empty')(), stamp + 1)
+    return path
+
+
+def _read(bag: Path) -> dict[str, list[Any]]:
+    """Every message by topic, with a plain AnyReader that was not handed our .msg files."""
+    out: dict[str, list[Any]] = {}
+    with AnyReader([bag]) as reader:
+        for conn, _, raw in reader.messages():
+            out.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+    return out
+
+
+def _diagnostics(msgs: dict[str, list[Any]]) -> list[tuple[str, int, str]]:
+    return [(s.name, s.level, s.message) for a in msgs['/diagnostics'] for s in a.status]
+
+
+def test_too_few_keyframes_at_a_recorded_trigger(tmp_path: Path) -> None:
+    bag = _bag(tmp_path / 'in', 3, triggers=(1,))
+    summary = replay(bag, tmp_path / 'out', build_settings())
+    assert not summary.ok and summary.triggers == 1  # the recorded trigger, not the end
+    assert summary.camera_info
+    msgs = _read(summary.output_bag)
+    assert len(msgs['/camera/image_raw']) == 3 and len(msgs['/camera/camera_info']) == 3
+    assert len(msgs['/' + topics.KEYFRAME_STATUS]) == 3
+    name, level, text = _diagnostics(msgs)[-1]
+    assert (name, level) == ('stockpile/keyframes', 2) and 'keyframe' in text
+    final = msgs['/' + topics.STATUS][-1]
+    assert final.state == 5 and final.advice  # FAILED, with advice
+    assert any('at least 3 needed' in p for p in summary.problems)
+
+
+def test_no_camera_info_is_reported_and_the_cli_exits_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = _bag(tmp_path / 'in', 2, info=False)
+    assert main(['replay', str(bag), '--out', str(tmp_path / 'out')]) == 1
+    err = capsys.readouterr().err
+    assert 'self-calibrated' in err and 'Traceback' not in err
+    diags = _diagnostics(_read(tmp_path / 'out' / 'replay.mcap'))
+    assert ('stockpile/camera_info', 1) in [(n, lvl) for n, lvl, _ in diags]
+
+
+def test_unknown_encoding_frames_are_skipped_and_counted(tmp_path: Path) -> None:
+    bag = _bag(tmp_path / 'in', 4, encoding='weird16')
+    summary = replay(bag, tmp_path / 'out', build_settings())
+    assert (summary.frames, summary.skipped, summary.ok) == (0, 4, False)
+    diags = _diagnostics(_read(summary.output_bag))
+    camera = [t for n, lvl, t in diags if n == 'stockpile/camera' and lvl == 2]
+    assert any('weird16' in t for t in camera) and any('4 frames skipped' in t for t in camera)
+
+
+def test_refuses_to_overwrite_and_bad_parameters_are_user_errors(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = _bag(tmp_path / 'in', 2)
+    out = tmp_path / 'out'
+    assert main(['replay', str(bag), '--out', str(out), '--set', 'sfm.overlap=0']) == 2
+    assert 'outside' in capsys.readouterr().err
+    replay(bag, out, build_settings())
+    assert main(['replay', str(bag), '--out', str(out)]) == 2
+    assert 'exists already' in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_simulated_bag_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / 'pile'
+    assert main(['simulate', '--out', str(bag), '--frames', '16', '--width', '320',
+                 '--height', '240', '--rocks', '5', '--threads', '1']) == 0  # fmt: skip
+    out = tmp_path / 'out'
+    assert main(['replay', str(bag), '--out', str(out), '--params', str(CONFIG),
+                 '--set', 'sfm.num_threads=1']) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert 'rocks, D50' in printed and str(out / 'result') in printed
+    report = json.loads((out / 'result' / 'report.json').read_text())
+    assert report['scale']['method'] != 'none'
+    for part in ('keyframes/keyframes.jsonl', 'sparse/sparse.json', 'dense/dense.ply',
+                 'mesh/mesh.ply'):  # fmt: skip
+        assert (out / 'work' / part).is_file(), part
+    msgs = _read(out / 'replay.mcap')
+    published = [topics.KEYFRAME_STATUS, topics.DIAGNOSTICS, topics.DENSE_CLOUD, topics.MESH,
+                 topics.MESH_READY, topics.SEGMENTED_CLOUD, topics.ROCK_MARKERS, topics.ROCKS,
+                 topics.GRADATION, topics.STATUS]  # fmt: skip
+    for topic in published:
+        assert msgs.get('/' + topic.lstrip('/')), topic
+    for topic in ('/camera/image_raw/compressed', '/camera/camera_info', '/tf', '/odom'):
+        assert msgs.get(topic), topic
+    assert len(msgs['/' + topics.ROCKS][-1].rocks) == len(report['rocks']) > 0
+    assert msgs['/' + topics.STATUS][-1].state == 4  # DONE
+    levels = {n: lvl for n, lvl, _ in _diagnostics(msgs)}
+    assert levels['stockpile/sfm'] == 0 and levels['stockpile/segment'] == 0

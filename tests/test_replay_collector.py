@@ -1,0 +1,72 @@
+"""The keyframe collector shared by the keyframe node and the replay."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stockpile_ros.camera import Frame
+from stockpile_ros.collector import KeyframeCollector, OdometryBuffer, heading_coverage
+from stockpile_ros.recon.keyframes import SelectorOptions
+
+
+def test_heading_coverage() -> None:
+    assert heading_coverage([]) == 0.0
+    assert heading_coverage([0.3]) == 0.0
+    full = list(np.linspace(0, 2 * math.pi, 40))
+    assert heading_coverage(full) == pytest.approx(1.0)
+    quarter = heading_coverage(list(np.linspace(0.05, 0.05 + math.pi / 2, 10)))
+    assert 0.22 < quarter < 0.3
+    # Back and forth over the same arc counts once; the short way across +-pi is taken.
+    assert heading_coverage([0.05, 1.0, 0.05, 1.0]) == heading_coverage([0.05, 1.0])
+    assert heading_coverage([math.pi - 0.1, -math.pi + 0.1]) < 0.1
+
+
+def _texture(shift: int) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    big = (rng.random((120, 400)) * 255).astype(np.uint8)
+    big = np.kron(big, np.ones((2, 2), dtype=np.uint8))
+    grey = big[:160, shift : shift + 200]
+    return np.repeat(grey[:, :, None], 3, axis=2).copy()
+
+
+def _quat(yaw: float) -> list[float]:
+    return [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]
+
+
+def test_collects_stores_and_resumes(tmp_path: Path) -> None:
+    options = SelectorOptions(min_spacing=1, min_parallax=0.05, reference_frames=3)
+    folder = tmp_path / 'keyframes'
+    collector = KeyframeCollector(folder, options, full_parallax=1.0)
+    for i in range(12):
+        frame = Frame(1000 * i, _texture(8 * i), 'cam', None, 'cam/image', i)
+        collector.push(frame, None)
+    state = collector.state
+    assert state.frames == 12
+    assert state.decisions.get('first') == 1
+    assert 2 <= state.keyframes < 12
+    assert state.coverage_source == 'parallax' and 0 < state.coverage <= 1
+    assert len(list(folder.glob('kf_*.png'))) == state.keyframes
+    again = KeyframeCollector(folder, options)
+    assert again.state.keyframes == state.keyframes
+    # With odometry the coverage is the heading sweep.
+    odo = KeyframeCollector(tmp_path / 'odo', options)
+    for i in range(12):
+        frame = Frame(1000 * i, _texture(8 * i), 'cam', None, 'cam/image', i)
+        odo.push(frame, {'position': [0.0, 0.0, 0.0], 'orientation_xyzw': _quat(0.2 * i)})
+    assert odo.state.coverage_source == 'odometry'
+    assert 0.2 < odo.state.coverage < 0.7
+
+
+def test_odometry_buffer_nearest_within_gap() -> None:
+    buf = OdometryBuffer(max_gap_ns=100)
+    assert buf.at(0) is None
+    buf.push(1000, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
+    buf.push(2000, (5.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
+    entry = buf.at(1950)
+    assert entry is not None and entry['position'] == [5.0, 2.0, 3.0]
+    assert entry['frame_id'] == 'odom'
+    assert buf.at(1500) is None
