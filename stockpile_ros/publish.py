@@ -16,7 +16,6 @@ import numpy as np
 import numpy.typing as npt
 
 from . import topics
-from .collector import CollectorState
 from .messages import MessageFactory
 from .outputs import (
     diagnostic_array,
@@ -28,6 +27,7 @@ from .outputs import (
     rock_array,
     rock_color,
 )
+from .recon.collector import CollectorState
 from .runner import Outcome
 from .segment.pipeline import Analysis
 

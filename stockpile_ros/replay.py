@@ -26,7 +26,6 @@ from .bagio.reader import (
 )
 from .bagio.writer import BagWriter
 from .camera import CameraModel, Frame
-from .collector import KeyframeCollector
 from .errors import StockpileError
 from .progress import progress
 from .publish import (
@@ -38,6 +37,7 @@ from .publish import (
     segmentation_outputs,
     status,
 )
+from .recon.collector import KeyframeCollector
 from .recon.pipeline import WorkFolder
 from .recon.sources import OdometryTrack
 from .runner import Outcome, run_reconstruction, run_segmentation

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from stockpile_ros.errors import CaptureError
+from stockpile_ros.geometry import Similarity
 from stockpile_ros.recon.ground import fit_ground, stockpile_transform
-from stockpile_ros.recon.scale import Similarity
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -6,6 +6,7 @@ import pytest
 
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.errors import StockpileError
+from stockpile_ros.geometry import umeyama
 from stockpile_ros.recon.scale import (
     ScaleEstimate,
     TargetSpec,
@@ -13,7 +14,6 @@ from stockpile_ros.recon.scale import (
     detect_charuco,
     scale_from_odometry,
     scale_from_target,
-    umeyama,
 )
 
 SPEC = TargetSpec(5, 4, 0.1, 0.075, 'DICT_4X4_50')

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from stockpile_ros.camera import Frame
-from stockpile_ros.collector import KeyframeCollector, OdometryBuffer, heading_coverage
+from stockpile_ros.recon.collector import KeyframeCollector, OdometryBuffer, heading_coverage
 from stockpile_ros.recon.keyframes import SelectorOptions
 
 

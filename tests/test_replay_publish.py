@@ -11,7 +11,6 @@ import open3d as o3d
 from segment_fixtures import small_pile
 
 from stockpile_ros import topics
-from stockpile_ros.collector import CollectorState
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 from stockpile_ros.messages import RosbagsFactory
 from stockpile_ros.msgs import typestore
@@ -21,6 +20,7 @@ from stockpile_ros.publish import (
     reconstruction_outputs,
     segmentation_outputs,
 )
+from stockpile_ros.recon.collector import CollectorState
 from stockpile_ros.runner import Outcome
 from stockpile_ros.segment.pipeline import analyse_mesh
 

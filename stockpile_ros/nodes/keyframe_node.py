@@ -15,8 +15,8 @@ from .. import topics
 from ..bagio.images import ImageError, decode_image
 from ..bagio.reader import CameraInfoError, camera_model_from_msg, message_stamp_ns
 from ..camera import CameraModel, Frame
-from ..collector import KeyframeCollector, OdometryBuffer
 from ..publish import diagnostics, keyframe_status
+from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.pipeline import WorkFolder
 from .common import Publishers, RclpyFactory, current_settings, declare_settings, now_ns
 

@@ -14,8 +14,8 @@ from std_srvs.srv import Trigger
 from stockpile_msgs.msg import PipelineStatus
 
 from .. import topics
-from ..collector import CollectorState
 from ..publish import reconstruction_diagnostics, reconstruction_outputs, status
+from ..recon.collector import CollectorState
 from ..runner import RECON_STAGES, run_reconstruction
 from .common import LATCHED, Publishers, RclpyFactory, current_settings, declare_settings, now_ns
 

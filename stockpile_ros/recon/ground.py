@@ -19,7 +19,7 @@ import numpy.typing as npt
 import open3d as o3d
 
 from ..errors import CaptureError
-from .scale import Similarity
+from ..geometry import Similarity
 
 __all__ = ['GroundFit', 'fit_ground', 'pile_mask', 'stockpile_transform']
 

@@ -21,9 +21,10 @@ from scipy.spatial.transform import Rotation
 from ..errors import CaptureError, StockpileError
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
+from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
 from .ground import fit_ground, pile_mask, stockpile_transform
-from .keyframes import KeyframeSelector, KeyframeStore, SelectorOptions
+from .keyframes import KeyframeStore, SelectorOptions
 from .scale import (
     ScaleEstimate,
     TargetSpec,
@@ -123,14 +124,11 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
     if kind == 'photos':
         # Photos were taken on purpose: keep every sharp one.
         selector_options = replace(selector_options, min_spacing=1, min_parallax=0.0)
-    selector = KeyframeSelector(selector_options)
-    store = KeyframeStore(work.keyframes)
-    if store.records:
-        selector.resume(store.image(store.records[-1]), len(store.records))
+    collector = KeyframeCollector(work.keyframes, selector_options)
+    store = collector.store
     before = len(store.records)
     odometry: OdometryTrack | None = None
     odometry_read = False
-    reasons: dict[str, int] = {}
     seen = 0
     for frame in progress(iter_frames(source, options.topic), 'keyframes', unit='frame'):
         seen += 1
@@ -142,15 +140,8 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
             frame_id = frame.camera.frame_id if frame.camera is not None else frame.frame_id
             odometry = OdometryTrack.from_bag(source, frame_id)
             odometry_read = True
-        decision = selector.push(frame.image)
-        reasons[decision.reason] = reasons.get(decision.reason, 0) + 1
-        if decision.accepted:
-            store.add(
-                frame,
-                odometry=None if odometry is None else odometry.at(frame.stamp_ns),
-                reason=decision.reason,
-                sharpness=decision.sharpness,
-            )
+        collector.push(frame, None if odometry is None else odometry.at(frame.stamp_ns))
+    reasons = collector.state.decisions
     if not store.records:
         raise CaptureError(
             'keyframes',

@@ -18,10 +18,10 @@ import numpy.typing as npt
 
 from ..camera import CameraModel
 from ..errors import StockpileError
+from ..geometry import umeyama
 
 __all__ = [
     'ScaleEstimate',
-    'Similarity',
     'TargetSpec',
     'bootstrap_scale',
     'combine',
@@ -29,7 +29,6 @@ __all__ = [
     'scale_from_odometry',
     'scale_from_target',
     'triangulate',
-    'umeyama',
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -92,19 +91,6 @@ class TargetSpec:
 
 
 @dataclass(frozen=True)
-class Similarity:
-    """``y = scale * rotation @ x + translation``."""
-
-    scale: float
-    rotation: F64
-    translation: F64
-
-    def apply(self, points: F64) -> F64:
-        """Transform Nx3 points."""
-        return np.asarray(self.scale * points @ self.rotation.T + self.translation)
-
-
-@dataclass(frozen=True)
 class ScaleEstimate:
     """Metres per model unit.
 
@@ -124,21 +110,6 @@ class ScaleEstimate:
     points: int = 0
     rms_residual: float = 0.0
     note: str = ''
-
-
-def umeyama(src: F64, dst: F64) -> Similarity:
-    """Least-squares similarity taking ``src`` onto ``dst`` (Umeyama 1991), both Nx3, N >= 3."""
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    xs, xd = src - mu_s, dst - mu_d
-    cov = xd.T @ xs / len(src)
-    u, sig, vt = np.linalg.svd(cov)
-    sign = np.eye(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        sign[2, 2] = -1.0
-    rot = u @ sign @ vt
-    var_s = float(np.mean(np.sum(xs**2, axis=1)))
-    scale = float(np.trace(np.diag(sig) @ sign)) / var_s
-    return Similarity(scale, rot, mu_d - scale * rot @ mu_s)
 
 
 def bootstrap_scale(src: F64, dst: F64, rounds: int = 200, seed: int = 0) -> float | None:

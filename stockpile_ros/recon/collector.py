@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .camera import Frame
-from .recon.keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
+from ..camera import Frame
+from .keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
 
 __all__ = [
     'HEADING_SECTORS',
