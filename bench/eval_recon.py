@@ -20,8 +20,8 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
+from stockpile_ros.geometry import Similarity
 from stockpile_ros.meshio import read_labelled_mesh
-from stockpile_ros.recon.scale import Similarity
 
 
 def evaluate(work: Path, truth_dir: Path) -> dict[str, Any]:
