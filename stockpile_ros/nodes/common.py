@@ -5,12 +5,14 @@ from __future__ import annotations
 import array
 from typing import Any
 
+import rclpy
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
     ParameterType,
 )
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -26,6 +28,7 @@ __all__ = [
     'current_settings',
     'declare_settings',
     'now_ns',
+    'spin',
 ]
 
 LATCHED = QoSProfile(
@@ -119,3 +122,24 @@ class Publishers:
         """Publish each message on its topic."""
         for topic, msg in publications:
             self._pubs[topic].publish(msg)
+
+
+def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
+    """Run nodes in one process on a multi-threaded executor until shut down.
+
+    Multi-threaded so that a service or a trigger is answered while a worker runs a stage.
+    """
+    rclpy.init(args=args)
+    nodes: list[Node] = []
+    executor = MultiThreadedExecutor()
+    try:
+        nodes = [node_type() for node_type in node_types]
+        for node in nodes:
+            executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown()

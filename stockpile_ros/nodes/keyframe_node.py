@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import rclpy
 from nav_msgs.msg import Odometry
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -18,7 +16,7 @@ from ..camera import CameraModel, Frame
 from ..publish import diagnostics, keyframe_status
 from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.pipeline import WorkFolder
-from .common import Publishers, RclpyFactory, current_settings, declare_settings, now_ns
+from .common import Publishers, RclpyFactory, current_settings, declare_settings, now_ns, spin
 
 __all__ = ['KeyframeNode', 'main']
 
@@ -100,17 +98,7 @@ class KeyframeNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the keyframe node."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = KeyframeNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin(KeyframeNode, args=args)
 
 
 if __name__ == '__main__':

@@ -5,9 +5,7 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Empty, String
 from std_srvs.srv import Trigger
@@ -17,7 +15,15 @@ from .. import topics
 from ..publish import reconstruction_diagnostics, reconstruction_outputs, status
 from ..recon.collector import CollectorState
 from ..runner import RECON_STAGES, run_reconstruction
-from .common import LATCHED, Publishers, RclpyFactory, current_settings, declare_settings, now_ns
+from .common import (
+    LATCHED,
+    Publishers,
+    RclpyFactory,
+    current_settings,
+    declare_settings,
+    now_ns,
+    spin,
+)
 
 __all__ = ['ReconstructionNode', 'main']
 
@@ -122,20 +128,8 @@ class ReconstructionNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Run the reconstruction node (multi-threaded: the service answers during a run)."""
-    rclpy.init(args=args)
-    node = None
-    executor = MultiThreadedExecutor()
-    try:
-        node = ReconstructionNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    """Run the reconstruction node."""
+    spin(ReconstructionNode, args=args)
 
 
 if __name__ == '__main__':

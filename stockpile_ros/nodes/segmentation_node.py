@@ -7,15 +7,21 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from .. import topics
 from ..publish import diagnostics, segmentation_outputs, status
 from ..runner import run_segmentation
-from .common import LATCHED, Publishers, RclpyFactory, current_settings, declare_settings, now_ns
+from .common import (
+    LATCHED,
+    Publishers,
+    RclpyFactory,
+    current_settings,
+    declare_settings,
+    now_ns,
+    spin,
+)
 
 __all__ = ['SegmentationNode', 'main']
 
@@ -84,19 +90,7 @@ class SegmentationNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the segmentation node."""
-    rclpy.init(args=args)
-    node = None
-    executor = MultiThreadedExecutor()
-    try:
-        node = SegmentationNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin(SegmentationNode, args=args)
 
 
 if __name__ == '__main__':
