@@ -14,9 +14,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial.transform import Rotation
 
 from . import topics
-from .messages import MessageFactory
+from .messages import MessageFactory, tf_message, transform_stamped
 from .outputs import (
     diagnostic_array,
     gradation_msg,
@@ -28,6 +29,7 @@ from .outputs import (
     rock_color,
 )
 from .recon.collector import CollectorState
+from .recon.pipeline import WorkFolder, odom_from_stockpile
 from .runner import Outcome
 from .segment.pipeline import Analysis
 
@@ -177,7 +179,9 @@ def reconstruction_outputs(
     """Build the dense cloud and the mesh of a finished reconstruction, in the stockpile frame.
 
     The dense cloud (model frame on disk) is moved with ``mesh.json``'s ``model_to_stockpile`` and
-    thinned to at most ``max_faces`` points; the mesh is decimated to ``max_faces`` faces.
+    thinned to at most ``max_faces`` points; the mesh is decimated to ``max_faces`` faces. With
+    odometry, a ``/tf_static`` transform places the stockpile frame in the odometry frame, so that
+    the camera and the pile show together.
     """
     import open3d as o3d
 
@@ -195,7 +199,14 @@ def reconstruction_outputs(
     step = max(1, math.ceil(len(points) / max_faces))
     mesh = read_labelled_mesh(work / 'mesh' / 'mesh.ply')
     verts, faces, vcol = _decimate(mesh.vertices, mesh.faces, mesh.colors, max_faces)
+    frames = []
+    if placed := odom_from_stockpile(WorkFolder(work)):
+        odom, sim = placed
+        quat = Rotation.from_matrix(sim.rotation).as_quat()
+        transform = transform_stamped(f, stamp_ns, odom, frame_id, sim.translation, quat)
+        frames.append((topics.TF_STATIC, tf_message(f, [transform])))
     return [
+        *frames,
         (topics.DENSE_CLOUD, pointcloud2(
             f, points[::step], None if colors is None else colors[::step], None,
             stamp_ns, frame_id)),

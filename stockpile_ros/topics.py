@@ -22,6 +22,7 @@ __all__ = [
     'ROCK_MARKERS',
     'SEGMENTED_CLOUD',
     'STATUS',
+    'TF_STATIC',
     'TRIGGER',
 ]
 
@@ -39,6 +40,8 @@ KEYFRAME_STATUS = 'stockpile/keyframes/status'  # stockpile_msgs/PipelineStatus
 DIAGNOSTICS = '/diagnostics'  # diagnostic_msgs/DiagnosticArray
 DENSE_CLOUD = 'stockpile/dense_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb)
 MESH = 'stockpile/mesh'  # visualization_msgs/MarkerArray (the Poisson surface as a triangle list)
+# Latched: where the stockpile frame lies in the odometry frame.
+TF_STATIC = '/tf_static'  # tf2_msgs/TFMessage
 MESH_READY = 'stockpile/mesh_ready'  # std_msgs/String: the work folder whose mesh/ is ready
 SEGMENTED_CLOUD = 'stockpile/segmented_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb, label)
 ROCK_MARKERS = 'stockpile/rock_markers'  # visualization_msgs/MarkerArray

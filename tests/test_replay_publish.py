@@ -8,9 +8,11 @@ from typing import Any
 
 import numpy as np
 import open3d as o3d
+from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
 from stockpile_ros import topics
+from stockpile_ros.camera import Frame
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 from stockpile_ros.messages import RosbagsFactory
 from stockpile_ros.msgs import typestore
@@ -21,6 +23,7 @@ from stockpile_ros.publish import (
     segmentation_outputs,
 )
 from stockpile_ros.recon.collector import CollectorState
+from stockpile_ros.recon.keyframes import KeyframeStore
 from stockpile_ros.runner import Outcome
 from stockpile_ros.segment.pipeline import analyse_mesh
 
@@ -96,8 +99,27 @@ def test_reconstruction_outputs_move_the_cloud_and_decimate(tmp_path: Path) -> N
     write_labelled_mesh(tmp_path / 'mesh' / 'mesh.ply', LabelledMesh(
         np.asarray(sphere.vertices), faces, np.zeros(len(faces), np.int32), None))  # fmt: skip
     sim = {'scale': 2.0, 'rotation': np.eye(3).ravel().tolist(), 'translation': [0.0, 0.0, 1.0]}
-    (tmp_path / 'mesh' / 'mesh.json').write_text(json.dumps({'model_to_stockpile': sim}))
+    # Four keyframes whose odometry camera positions are the stockpile ones turned 90 degrees about
+    # z and shifted: the stockpile frame must be placed there in the odometry frame.
+    store = KeyframeStore(tmp_path / 'keyframes')
+    turn = Rotation.from_euler('z', 90, degrees=True)
+    shift = np.array([5.0, -1.0, 0.2])
+    keyframes = []
+    for i, position in enumerate([[0, 0, 1], [1, 0, 1], [1, 1, 1.5], [0, 1, 1.2]]):
+        odometry = {'position': (turn.apply(position) + shift).tolist(), 'frame_id': 'odom',
+                    'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]}  # fmt: skip
+        frame = Frame(i, np.zeros((4, 4, 3), np.uint8), 'camera_optical_frame', index=i)
+        record = store.add(frame, odometry=odometry)
+        keyframes.append({'stamp_ns': i, 'file': record.file, 'position': position,
+                          'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]})  # fmt: skip
+    info = {'model_to_stockpile': sim, 'keyframes': keyframes, 'scale': {'method': 'target'}}
+    (tmp_path / 'mesh' / 'mesh.json').write_text(json.dumps(info))
     out = dict(reconstruction_outputs(F, 3, tmp_path, 'stockpile', max_faces=1000))
+    (placed,) = _roundtrip(out[topics.TF_STATIC]).transforms
+    assert (placed.header.frame_id, placed.child_frame_id) == ('odom', 'stockpile')
+    t, q = placed.transform.translation, placed.transform.rotation
+    assert np.allclose([t.x, t.y, t.z], shift, atol=1e-9)
+    assert np.allclose(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), turn.as_matrix())
     dense = _roundtrip(out[topics.DENSE_CLOUD])
     xyz = np.frombuffer(dense.data.tobytes(), dtype='<f4').reshape(-1, 4)[:, :3]
     assert np.allclose(xyz, 2 * pts + [0, 0, 1], atol=1e-5)

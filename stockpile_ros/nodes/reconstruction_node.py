@@ -45,6 +45,7 @@ class ReconstructionNode(Node):
             topics.DENSE_CLOUD: 'sensor_msgs/msg/PointCloud2',
             topics.MESH: 'visualization_msgs/msg/MarkerArray',
             topics.MESH_READY: 'std_msgs/msg/String',
+            topics.TF_STATIC: 'tf2_msgs/msg/TFMessage',
         })  # fmt: skip
         # The service answers while a run is in progress: its own group, never blocked by others.
         self.create_service(Trigger, topics.RECONSTRUCT_SERVICE, self.on_service,

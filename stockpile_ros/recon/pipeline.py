@@ -19,6 +19,7 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from ..errors import CaptureError, StockpileError
+from ..geometry import Similarity, umeyama
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
 from .collector import KeyframeCollector
@@ -42,6 +43,7 @@ __all__ = [
     'ReconOptions',
     'WorkFolder',
     'estimate_scale',
+    'odom_from_stockpile',
     'reconstruct',
     'run_dense_stage',
     'run_keyframes',
@@ -253,6 +255,36 @@ def _keyframe_poses(
             }
         )
     return out
+
+
+def odom_from_stockpile(work: WorkFolder) -> tuple[str, Similarity] | None:
+    """Where the ``stockpile`` frame lies in the odometry frame, from the keyframes seen in both.
+
+    Fits the keyframes' optical centres in the stockpile frame (``mesh.json``) onto their odometry
+    camera positions (``keyframes.jsonl``). The fit is rigid (scale 1) when the mesh is metric.
+
+    Returns:
+        The odometry frame's name and the similarity, or None without odometry on at least three
+        registered keyframes.
+
+    """
+    info = json.loads((work.mesh / 'mesh.json').read_text())
+    in_stockpile = {k['file']: k['position'] for k in info['keyframes'] if 'file' in k}
+    src, dst, frame = [], [], ''
+    for record in KeyframeStore(work.keyframes).records:
+        odo = record.odometry
+        if odo is None or record.file not in in_stockpile:
+            continue
+        src.append(in_stockpile[record.file])
+        dst.append(odo.get('camera_position', odo['position']))
+        frame = str(odo.get('frame_id', 'odom'))
+    if len(src) < 3:
+        return None
+    sim = umeyama(np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64))
+    if info['scale']['method'] != 'none':
+        centre_s, centre_d = np.mean(src, axis=0), np.mean(dst, axis=0)
+        sim = Similarity(1.0, sim.rotation, centre_d - sim.rotation @ centre_s)
+    return frame, sim
 
 
 def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
