@@ -41,7 +41,6 @@ setup(
     maintainer_email='maintainers@stockpile-ros.invalid',
     description='Measure the rocks of a stockpile from a moving camera (ROS 2 Jazzy).',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'stockpile = stockpile_ros.cli:main',
