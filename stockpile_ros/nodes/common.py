@@ -6,12 +6,7 @@ import array
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -39,9 +34,6 @@ LATCHED = QoSProfile(
 )
 """Results: a dashboard that connects late still gets the last one (subscribe the same way)."""
 
-_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}  # fmt: skip
-
 
 class RclpyFactory:
     """Message factory over the rclpy message packages (see stockpile_ros.messages)."""
@@ -51,9 +43,10 @@ class RclpyFactory:
         return get_message(msgtype)
 
     def u8(self, data: Any) -> Any:
-        """Return ``array('B')``, what rclpy stores ``uint8[]`` as."""
-        return array.array('B', bytes(memoryview(data).cast('B')) if not isinstance(data, bytes)
-                           else data)  # fmt: skip
+        """Return ``array('B')``: the ``uint8[]`` setter takes it as is, a list would be checked."""
+        out = array.array('B')
+        out.frombytes(memoryview(data).cast('B'))
+        return out
 
     def f64(self, data: Any) -> Any:
         """Return a list of floats (rclpy accepts it for fixed and unbounded ``float64[]``)."""
@@ -62,12 +55,8 @@ class RclpyFactory:
 
 
 def _descriptor(setting: Setting) -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(
-        name=setting.name,
-        type=_TYPES[type(setting.default)],
-        description=setting.description,
-        read_only=setting.read_only,
-    )
+    # No name or type: declare_parameter sets both itself (from the name and the default's type).
+    descriptor = ParameterDescriptor(description=setting.description, read_only=setting.read_only)
     if setting.choices:
         descriptor.additional_constraints = 'one of: ' + ', '.join(setting.choices)
     if setting.low is not None and setting.high is not None:
@@ -140,6 +129,7 @@ def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        executor.shutdown()
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
