@@ -149,6 +149,8 @@ _RANGES: dict[str, tuple[float, float]] = {
     'segment.ground_min_nz': (0.0, 1.0),
     'segment.min_region_fraction': (0.0, 1.0),
     'segment.min_region_faces': (0, 100_000_000),
+    'segment.border_depth': (0.0, 10.0),
+    'segment.border_min_edges': (0, 100_000_000),
     'measure.specific_gravity': (0.5, 10.0),
     'measure.min_faces': (0, 100_000_000),
     'measure.height_bins': (1, 1000),

@@ -8,7 +8,10 @@ Two presets of :class:`SegmentParams`:
   ``bench/bench_segment.py``): the ground plane is excluded first, ``t = 0.9`` (stricter than the
   paper's 0.7 and the authors' code's 0.81: Poisson rounds contact creases, and a looser test merges
   touching rocks), seeds from the most convex faces, then every region under 1 % of the searched
-  faces is a fragment and is merged into the neighbouring region it shares the longest border with.
+  faces is a fragment and is merged into the neighbouring region it shares the longest border with;
+  last, neighbouring regions whose union stays convex across their shared border are joined (on
+  reconstructed piles, noise stops the search inside single rocks: this took precision from 0.38
+  to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``).
 """
 
 from __future__ import annotations
@@ -18,12 +21,21 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import ConvexHull, QhullError
 
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .criterion import PAPER_THRESHOLD, edge_scores
 from .region import grow_regions
 
-__all__ = ['SegmentParams', 'Segmentation', 'merge_fragments', 'segment_mesh']
+F64 = npt.NDArray[np.float64]
+
+__all__ = [
+    'SegmentParams',
+    'Segmentation',
+    'merge_convex_borders',
+    'merge_fragments',
+    'segment_mesh',
+]
 
 Mode = Literal['paper', 'default']
 I32 = npt.NDArray[np.int32]
@@ -50,6 +62,15 @@ class SegmentParams:
         min_region_faces: Regions under this many faces are fragments as well [0].
         merge_fragments: Merge fragments into the neighbouring region they share the most edges
             with; when off, or when a fragment has no neighbour, it gets label 0 [off].
+        merge_convex: After the fragment merge, join neighbouring regions whose union is convex
+            across their shared border (see ``merge_convex_borders``) [off]: on a
+            reconstructed mesh, noise stops the search inside single rocks.
+        border_depth: Largest median depth of the shared border under the convex hull of the
+            union (along the border's outward normal), over the square root of the smaller
+            region's area, for a join. On four reconstructed piles 0.12 joined every split rock
+            and no touching rocks; 0.16 began to join touching rocks, 0.05 left splits.
+        border_min_edges: Borders shorter than this many face edges are never joined (a corner
+            contact says little about the surface between the regions).
 
     """
 
@@ -63,6 +84,9 @@ class SegmentParams:
     min_region_fraction: float = 0.01
     min_region_faces: int = 30
     merge_fragments: bool = True
+    merge_convex: bool = True
+    border_depth: float = 0.12
+    border_min_edges: int = 5
 
     @classmethod
     def paper(cls) -> SegmentParams:
@@ -76,6 +100,7 @@ class SegmentParams:
             min_region_fraction=0.0,
             min_region_faces=0,
             merge_fragments=False,
+            merge_convex=False,
         )
 
     @classmethod
@@ -168,6 +193,90 @@ def merge_fragments(labels: I32, adj: FaceAdjacency, min_faces: int, merge: bool
         labels = target[labels].astype(np.int32)
 
 
+def _border_depth(
+    vertices: F64,
+    faces: npt.NDArray[np.int64],
+    members: npt.NDArray[np.bool_],
+    border: F64,
+    outward: F64,
+    size: float,
+) -> float:
+    pts = vertices[np.unique(faces[members])]
+    try:
+        hull = ConvexHull(pts)
+    except (QhullError, ValueError):
+        return float('inf')
+    eq = hull.equations
+    # Distance from each border point along its outward normal to where it leaves the hull.
+    gap = -(border @ eq[:, :3].T + eq[:, 3])
+    cos = outward @ eq[:, :3].T
+    with np.errstate(divide='ignore', invalid='ignore'):
+        reach = np.where(cos > 1e-9, np.maximum(gap, 0.0) / cos, np.inf)
+    return float(np.median(reach.min(axis=1))) / size
+
+
+def merge_convex_borders(
+    vertices: F64,
+    geom: FaceGeometry,
+    labels: I32,
+    adj: FaceAdjacency,
+    faces: npt.NDArray[np.int64],
+    max_depth: float,
+    min_edges: int,
+) -> I32:
+    """Join neighbouring regions whose union is convex across their shared border.
+
+    The shared border of two parts of one convex rock lies on the convex hull of their union; the
+    valley where two rocks touch lies under it. The test is the median depth of the border
+    (midpoints of the centroids of the face pairs across it) under the hull of the union's
+    vertices, measured along the border's outward normal, over the square root of the smaller
+    region's area; the shallowest border is joined first and the depths are recomputed after each
+    join.
+
+    Args:
+        vertices: Nx3 vertex positions.
+        geom: Face centroids and areas.
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        faces: Mx3 triangles.
+        max_depth: Borders with a relative depth under this are joined.
+        min_edges: Borders of fewer face edges are left alone.
+
+    Returns:
+        The merged labels (ids are those of the surviving regions).
+
+    """
+    labels = labels.copy()
+    cache: dict[tuple[int, int], float] = {}
+    while True:
+        a, b = labels[adj.i], labels[adj.j]
+        cross = (a != b) & (a > 0) & (b > 0)
+        lo, hi = np.minimum(a, b)[cross], np.maximum(a, b)[cross]
+        mid = 0.5 * (geom.centroids[adj.i[cross]] + geom.centroids[adj.j[cross]])
+        out = geom.normals[adj.i[cross]] + geom.normals[adj.j[cross]]
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+        area = np.bincount(labels, weights=geom.areas)
+        pairs, inverse, count = np.unique(
+            np.stack([lo, hi], axis=1), axis=0, return_inverse=True, return_counts=True
+        )
+        inverse = inverse.ravel()
+        best, best_depth = -1, max_depth
+        for k in np.flatnonzero(count >= min_edges):
+            key = (int(pairs[k, 0]), int(pairs[k, 1]))
+            if key not in cache:
+                size = float(np.sqrt(min(area[key[0]], area[key[1]])))
+                members = (labels == key[0]) | (labels == key[1])
+                sel = inverse == k
+                cache[key] = _border_depth(vertices, faces, members, mid[sel], out[sel], size)
+            if cache[key] < best_depth:
+                best, best_depth = int(k), cache[key]
+        if best < 0:
+            return labels
+        keep, gone = int(pairs[best, 0]), int(pairs[best, 1])
+        labels[labels == gone] = keep
+        cache = {k: d for k, d in cache.items() if keep not in k and gone not in k}
+
+
 def _renumber_by_size(labels: I32) -> I32:
     sizes = np.bincount(labels)
     sizes[0] = 0
@@ -233,4 +342,8 @@ def segment_mesh(
     min_faces = max(p.min_region_faces, int(np.ceil(p.min_region_fraction * int(active.sum()))))
     if min_faces > 1:
         labels = merge_fragments(labels, search, min_faces, p.merge_fragments)
+    if p.merge_convex:
+        labels = merge_convex_borders(
+            v, geom, labels, search, f, p.border_depth, p.border_min_edges
+        )
     return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p)
