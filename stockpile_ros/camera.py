@@ -52,6 +52,10 @@ class CameraModel:
         """Principal point y [px]."""
         return float(self.k[1, 2])
 
+    def fits(self, image: npt.NDArray[np.generic]) -> bool:
+        """Whether this model describes ``image``: its size must match (else self-calibrate)."""
+        return (self.height, self.width) == image.shape[:2]
+
     @classmethod
     def from_fov(cls, width: int, height: int, hfov_deg: float, **kwargs: Any) -> CameraModel:
         """Build a distortion-free camera from its horizontal field of view."""

@@ -297,9 +297,7 @@ def _stream(
             continue
         frame_id = str(msg.header.frame_id)
         stamp_ns = message_stamp_ns(msg, log_ns)
-        usable = camera
-        if usable is not None and (usable.width, usable.height) != image.shape[1::-1]:
-            usable = None
+        usable = camera if camera is not None and camera.fits(image) else None
         frame = Frame(stamp_ns, image, frame_id, usable, topic, summary.frames)
         summary.frames += 1
         if settings.recon.use_odometry and not odometry_read:

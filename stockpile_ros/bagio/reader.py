@@ -508,8 +508,8 @@ class BagReader:
         for _, index, _, (frame, msg) in _decoded(reader, path, conns, convert, skip_bad, stats):
             frame.index = index
             camera = infos.match(frame.topic, frame.frame_id, frame.stamp_ns)
-            height, width = frame.image.shape[:2]
-            if camera is not None and (camera.width, camera.height) != (width, height):
+            if camera is not None and not camera.fits(frame.image):
+                height, width = frame.image.shape[:2]
                 if not mismatch_noted:
                     stats.problems.append(
                         f'{path}, topic {frame.topic}: CameraInfo is '

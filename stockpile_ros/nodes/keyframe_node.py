@@ -87,7 +87,7 @@ class KeyframeNode(Node):
             self.note(
                 'camera_info', 'WARN', 'no CameraInfo yet: intrinsics will be self-calibrated'
             )
-        elif (camera.width, camera.height) != image.shape[1::-1]:
+        elif not camera.fits(image):
             self.note('camera_size', 'WARN', 'CameraInfo size differs from the images: ignored')
             camera = None
         frame = Frame(stamp, image, msg.header.frame_id, camera, topics.IMAGE,
