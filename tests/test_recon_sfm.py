@@ -9,8 +9,9 @@ from recon_synth import render, scene_mesh
 
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.errors import CaptureError
-from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.recon.keyframes import KeyframeRecord, KeyframeStore
 from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
+from stockpile_ros.recon.sfm import _shared_camera
 
 
 def _store(work: WorkFolder, images: list[np.ndarray]) -> None:
@@ -71,3 +72,12 @@ def test_rotation_only_fails_as_degenerate_motion(tmp_path: Path) -> None:
     assert 'rotation on the spot' in err.value.reason
     assert 'sideways' in err.value.advice
     assert len(list(work.keyframes.glob('kf_*.png'))) == 6
+
+
+def test_keyframes_before_the_first_camera_info_share_its_intrinsics() -> None:
+    cam = CameraModel.from_fov(320, 240, 60.0)
+    other = CameraModel.from_fov(320, 240, 70.0)
+    early, late = KeyframeRecord('a.png', 0, 0), KeyframeRecord('b.png', 1, 1, cam)
+    assert _shared_camera([early, late, KeyframeRecord('c.png', 2, 2, cam)]) is cam
+    assert _shared_camera([early, late, KeyframeRecord('c.png', 2, 2, other)]) is None
+    assert _shared_camera([early, KeyframeRecord('c.png', 2, 2)]) is None

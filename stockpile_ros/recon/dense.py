@@ -2,9 +2,10 @@
 
 Each keyframe is paired with a nearby keyframe at a useful baseline; the pair is rectified
 (``cv2.stereoRectify``, vertical pairs transposed, right-to-left pairs mirrored) and matched with
-semi-global block matching over the disparity range the sparse points predict. Every depth map is
-then checked against the depth maps of neighbouring keyframes (each from its own pair): a point is
-kept only where another view sees the same surface at the same depth. The survivors are fused on a
+semi-global block matching (four symmetric paths) over the disparity range the sparse points
+predict. Every depth map is then checked against the depth maps of neighbouring keyframes (each
+from its own pair): a point is kept only where another view sees the same surface at the same
+depth. The survivors are fused on a
 voxel grid; normals are estimated from neighbours and turned towards the cameras that saw them.
 With a CUDA build of pycolmap, COLMAP's PatchMatch stereo and fusion are used instead.
 """
@@ -201,7 +202,10 @@ def _pair_depth(
         uniquenessRatio=10,
         speckleWindowSize=100,
         speckleRange=2,
-        mode=cv2.STEREO_SGBM_MODE_SGBM,
+        # Four paths, both ways along rows and columns: the default single top-down pass pulls
+        # disparities towards the rows above, so surfaces receding along the columns (the ground
+        # and the pile seen from a cart) came out about 0.3 px of disparity (0.2 %) too deep.
+        mode=cv2.STEREO_SGBM_MODE_HH4,
     )
     disp = sgbm.compute(greys[0], greys[1]).astype(np.float32) / 16.0
     if shift > 0:

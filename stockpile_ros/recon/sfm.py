@@ -1,9 +1,10 @@
 """Structure-from-Motion of the keyframes with pycolmap: features, matching, mapping, a report.
 
-Intrinsics from CameraInfo, when every keyframe carries the same one, are given to COLMAP as a fixed
-camera (PINHOLE, OPENCV, FULL_OPENCV or OPENCV_FISHEYE); otherwise one shared SIMPLE_RADIAL camera
-is self-calibrated. COLMAP puts the centre of the top-left pixel at (0.5, 0.5), ROS and OpenCV at
-(0, 0): principal points are shifted by half a pixel on the way in and out.
+Intrinsics from CameraInfo, when the keyframes that carry one all carry the same one, are given to
+COLMAP as a fixed camera (PINHOLE, OPENCV, FULL_OPENCV or OPENCV_FISHEYE); otherwise one shared
+SIMPLE_RADIAL camera is self-calibrated. COLMAP puts the centre of the top-left pixel at
+(0.5, 0.5), ROS and OpenCV at (0, 0): principal points are shifted by half a pixel on the way in
+and out.
 """
 
 from __future__ import annotations
@@ -157,15 +158,18 @@ def _opencv_camera(camera: pycolmap.Camera) -> CameraModel:
 
 
 def _shared_camera(records: list[KeyframeRecord]) -> CameraModel | None:
-    """Return the CameraInfo model all keyframes share, None when any lacks it or they differ."""
-    first = records[0].camera if records else None
-    if first is None:
+    """Return the CameraInfo model the keyframes share, None when none has one or they differ.
+
+    Keyframes without one are taken to come from the same camera: a stream's first images often
+    arrive before its first CameraInfo.
+    """
+    cameras = [r.camera for r in records if r.camera is not None]
+    if not cameras:
         return None
-    for record in records[1:]:
-        cam = record.camera
+    first = cameras[0]
+    for cam in cameras[1:]:
         if (
-            cam is None
-            or (cam.width, cam.height) != (first.width, first.height)
+            (cam.width, cam.height) != (first.width, first.height)
             or not np.allclose(cam.k, first.k)
             or not np.array_equal(np.asarray(cam.d), np.asarray(first.d))
         ):
