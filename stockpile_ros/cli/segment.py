@@ -26,7 +26,7 @@ pile's gradation, optionally check it against a riprap class, and write the resu
 report.json, segments.ply, rocks.csv, gradation.png, render.png, index.html.
 
 Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" excludes the
-ground, uses t = 0.9, seeds from convex faces, merges fragments under 1 % of the faces and joins
+ground, uses t = 0.93, seeds from convex faces, merges fragments under 1 % of the faces and joins
 neighbouring regions whose union is convex across their shared border."""
 
 

@@ -4,21 +4,16 @@ Only the top of a pile is visible, so each rock is completed before it is measur
 rule (``completion``):
 
 * ``"hull"`` (default): the convex hull of the visible surface alone, the unseen side closed by the
-  hull's flat faces. A lower bound for a convex rock; measured best on simulated piles, whose
-  rocks are
-  mostly seen from several sides (volume MAPE about 11 %, see ``bench/bench_segment.py``).
-* ``"mirror"``: a rock whose visible surface reaches down to the ground (lowest visible
-  point under ``ground_contact``) rests on it and is seen down to its base: it is the convex hull of
-  its visible surface (the hidden contact patch is closed flat). Any other rock rests on rocks that
-  hide its underside: its visible surface is reflected through a horizontal plane and the convex
-  hull
-  of both halves is the rock. The plane sits at the rock's widest visible horizontal section or at
-  the
+  hull's flat faces. A lower bound for a convex rock; measured best on simulated piles, whose rocks
+  are mostly seen from several sides (volume MAPE about 11 %, see ``bench/bench_segment.py``).
+* ``"mirror"``: a rock whose visible surface reaches down to the ground (lowest visible point under
+  ``ground_contact``) rests on it and is seen down to its base: it is the convex hull of its visible
+  surface (the hidden contact patch is closed flat). Any other rock rests on rocks that hide its
+  underside: its visible surface is reflected through a horizontal plane and the convex hull of
+  both halves is the rock. The plane sits at the rock's widest visible horizontal section or at the
   median height of its rim (where the visible surface ends), whichever is higher: a rock seen only
-  as
-  a cap is assumed as deep below its rim as it rises above it, a rock seen past its equator
-  symmetric
-  about the equator. Reflected points are clamped to the ground plane ``z = 0``.
+  as a cap is assumed as deep below its rim as it rises above it, a rock seen past its equator
+  symmetric about the equator. Reflected points are clamped to the ground plane ``z = 0``.
 * ``"ground"``: the convex hull of the visible surface and its vertical projection onto ``z = 0``
   (a column down to the ground; an upper bound for rocks resting on others).
 
