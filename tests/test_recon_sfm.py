@@ -5,13 +5,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from recon_synth import render, scene_mesh
+from recon_synth import look_at, orbit, render, scene_mesh
 
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.errors import CaptureError
 from stockpile_ros.recon.keyframes import KeyframeRecord, KeyframeStore
 from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
-from stockpile_ros.recon.sfm import _shared_camera
+from stockpile_ros.recon.sfm import SfmOptions, _shared_camera, load_sparse
 
 
 def _store(work: WorkFolder, images: list[np.ndarray]) -> None:
@@ -81,3 +81,23 @@ def test_keyframes_before_the_first_camera_info_share_its_intrinsics() -> None:
     assert _shared_camera([early, late, KeyframeRecord('c.png', 2, 2, cam)]) is cam
     assert _shared_camera([early, late, KeyframeRecord('c.png', 2, 2, other)]) is None
     assert _shared_camera([early, KeyframeRecord('c.png', 2, 2)]) is None
+
+
+def test_a_rerun_gives_the_same_model(tmp_path: Path) -> None:
+    """Image numbering, RANSAC and bundle adjustment must not depend on thread timing."""
+    mesh = scene_mesh()
+    cam = CameraModel.from_fov(320, 240, 70.0)
+    images = []
+    for centre in orbit(8):
+        rot, trans = look_at(centre, np.array([0.0, 0.0, 0.1]))
+        images.append(render(mesh, cam.k, (320, 240), rot, trans))
+    runs = []
+    for name in ('a', 'b'):
+        work = WorkFolder(tmp_path / name)
+        _store(work, images)
+        reconstruct(None, work.root, ReconOptions(sfm=SfmOptions(num_threads=2)), stage='sfm')
+        runs.append(load_sparse(work.sparse))
+    assert sorted(runs[0].views) == sorted(runs[1].views) and len(runs[0].views) == 8
+    for name, view in runs[0].views.items():
+        assert np.array_equal(view.center, runs[1].views[name].center)
+    assert np.array_equal(runs[0].points, runs[1].points)

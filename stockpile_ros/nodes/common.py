@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import array
+import threading
+from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -20,6 +22,7 @@ __all__ = [
     'LATCHED',
     'Publishers',
     'RclpyFactory',
+    'SingleRun',
     'current_settings',
     'declare_settings',
     'now_ns',
@@ -33,6 +36,23 @@ LATCHED = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
 )
 """Results: a dashboard that connects late still gets the last one (subscribe the same way)."""
+
+
+class SingleRun:
+    """One run at a time in a background thread, so that the node's callbacks return at once."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+
+    def start(self, target: Callable[..., None], *args: Any) -> bool:
+        """Start ``target(*args)`` unless a run is still going on; return whether it started."""
+        with self._lock:
+            if self._thread is not None and self._thread.is_alive():
+                return False
+            self._thread = threading.Thread(target=target, args=args, daemon=True)
+            self._thread.start()
+            return True
 
 
 class RclpyFactory:

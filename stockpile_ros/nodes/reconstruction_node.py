@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -19,6 +18,7 @@ from .common import (
     LATCHED,
     Publishers,
     RclpyFactory,
+    SingleRun,
     current_settings,
     declare_settings,
     now_ns,
@@ -35,8 +35,7 @@ class ReconstructionNode(Node):
         super().__init__('stockpile_reconstruction', **kwargs)
         declare_settings(self, 'reconstruction')
         self.f = RclpyFactory()
-        self.lock = threading.Lock()
-        self.worker: threading.Thread | None = None
+        self.worker = SingleRun()
         self.keyframes = 0
         self.auto_started_at = 0
         self.pubs = Publishers(self, {
@@ -58,11 +57,8 @@ class ReconstructionNode(Node):
 
     def start(self, why: str) -> tuple[bool, str]:
         """Start a run in the worker thread unless one is running; return whether and why."""
-        with self.lock:
-            if self.worker is not None and self.worker.is_alive():
-                return False, 'a reconstruction is already running; wait for it to finish'
-            self.worker = threading.Thread(target=self.run, args=(now_ns(self),), daemon=True)
-            self.worker.start()
+        if not self.worker.start(self.run, now_ns(self)):
+            return False, 'a reconstruction is already running; wait for it to finish'
         self.get_logger().info(f'reconstruction started ({why})')
         return True, f'reconstruction started ({why})'
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ from .common import (
     LATCHED,
     Publishers,
     RclpyFactory,
+    SingleRun,
     current_settings,
     declare_settings,
     now_ns,
@@ -33,8 +33,7 @@ class SegmentationNode(Node):
         super().__init__('stockpile_segmentation', **kwargs)
         declare_settings(self, 'segmentation')
         self.f = RclpyFactory()
-        self.lock = threading.Lock()
-        self.worker: threading.Thread | None = None
+        self.worker = SingleRun()
         self.pubs = Publishers(self, {
             topics.STATUS: 'stockpile_msgs/msg/PipelineStatus',
             topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
@@ -47,14 +46,8 @@ class SegmentationNode(Node):
 
     def on_mesh_ready(self, msg: String) -> None:
         """Start segmenting the work folder named in the message, unless a run is going on."""
-        with self.lock:
-            if self.worker is not None and self.worker.is_alive():
-                self.get_logger().warning('mesh ready while segmenting: refused, finish first')
-                return
-            self.worker = threading.Thread(
-                target=self.run, args=(Path(msg.data), now_ns(self)), daemon=True
-            )
-            self.worker.start()
+        if not self.worker.start(self.run, Path(msg.data), now_ns(self)):
+            self.get_logger().warning('mesh ready while segmenting: refused, finish first')
 
     def run(self, work_dir: Path, stamp_ns: int) -> None:
         """Segment, measure and publish (worker thread)."""

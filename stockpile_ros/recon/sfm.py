@@ -40,7 +40,8 @@ class SfmOptions:
         vocab_tree: Path of a COLMAP vocabulary tree; when given, sequential matching also
             detects loops with it.
         mapper: ``"incremental"`` or ``"global"`` (GLOMAP).
-        num_threads: Threads for every COLMAP step.
+        num_threads: Threads for feature extraction, matching and the global mapper; the
+            incremental mapper runs on one, so that a rerun gives the same model.
         min_registered_fraction: Below this share of registered keyframes the capture fails.
         min_features: Below this mean number of features per keyframe the capture is textureless.
         use_camera_info: Use CameraInfo intrinsics when present (fixed camera).
@@ -252,6 +253,16 @@ def run_sfm(
     extraction.max_image_size = options.max_image_size
     extraction.num_threads = options.num_threads
     extraction.sift.max_num_features = options.max_features
+    # Images enter the database in capture order first: parallel extraction would number them in
+    # the order they finish, and the mapper's choices depend on the numbering.
+    pycolmap.Database.open(str(database)).close()
+    pycolmap.import_images(
+        database,
+        image_dir,
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        image_names=names,
+        options=reader,
+    )
     pycolmap.extract_features(
         database,
         image_dir,
@@ -274,8 +285,16 @@ def run_sfm(
 
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = options.num_threads
+    # COLMAP seeds RANSAC at random by default: with a fixed seed a rerun gives the same model.
+    verification = pycolmap.TwoViewGeometryOptions()
+    verification.ransac.random_seed = 0
     if options.matcher == 'exhaustive':
-        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+        pycolmap.match_exhaustive(
+            database,
+            matching_options=matching,
+            verification_options=verification,
+            device=pycolmap.Device.cpu,
+        )
     elif options.matcher == 'sequential':
         pairing = pycolmap.SequentialPairingOptions()
         pairing.overlap = options.overlap
@@ -284,7 +303,11 @@ def run_sfm(
             pairing.loop_detection = True
             pairing.vocab_tree_path = options.vocab_tree
         pycolmap.match_sequential(
-            database, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu
+            database,
+            matching_options=matching,
+            pairing_options=pairing,
+            verification_options=verification,
+            device=pycolmap.Device.cpu,
         )
     else:
         raise ValueError(f'unknown matcher {options.matcher!r}')
@@ -293,7 +316,9 @@ def run_sfm(
     models_dir.mkdir()
     if options.mapper == 'incremental':
         mapping = pycolmap.IncrementalPipelineOptions()
-        mapping.num_threads = options.num_threads
+        # One thread: threaded bundle adjustment sums in a varying order, and the rounding
+        # differences change which points are kept (a rerun gave 10341 points instead of 10345).
+        mapping.num_threads = 1
         mapping.random_seed = 0
         if fixed:
             mapping.ba_refine_focal_length = False
