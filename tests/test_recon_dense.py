@@ -14,8 +14,7 @@ from stockpile_ros.recon.sfm import SparseModel, View
 
 def test_depth_of_ground_seen_obliquely_is_unbiased(tmp_path: Path) -> None:
     # A surface receding along the image rows is where a one-pass (top-down) semi-global matcher
-    # pulls disparities towards the rows above: depths came out
-    # 0.6 % too deep here.
+    # pulls disparities towards the rows above: depths came out 0.6 % too deep here.
     mesh = scene_mesh(rocks=0)
     cam = CameraModel.from_fov(640, 480, 60.0)
     target = np.array([0.0, 0.0, 0.0])

@@ -5,8 +5,8 @@ Each keyframe is paired with a nearby keyframe at a useful baseline; the pair is
 semi-global block matching (four symmetric paths) over the disparity range the sparse points
 predict. Every depth map is then checked against the depth maps of neighbouring keyframes (each
 from its own pair): a point is kept only where another view sees the same surface at the same
-depth. The survivors are fused on a
-voxel grid; normals are estimated from neighbours and turned towards the cameras that saw them.
+depth. The survivors are fused on a voxel grid; normals are estimated from neighbours and turned
+towards the cameras that saw them.
 With a CUDA build of pycolmap, COLMAP's PatchMatch stereo and fusion are used instead.
 """
 
