@@ -79,3 +79,20 @@ def test_completions_order_for_a_cap() -> None:
     assert vols['hull'] < vols['mirror'] < vols['ground']
     # Within the polygonal sphere's own shortfall plus the height-bin resolution.
     assert abs(vols['mirror'] / ball - 1) < 0.1
+
+
+def test_a_fringe_outside_the_rock_does_not_set_its_size() -> None:
+    # A sphere with one vertex pulled 1.5 cm out: the spike is a sliver of the surface, as the
+    # stereo fringe at a silhouette is; trimming the outermost 0.2 % of the area leaves it out.
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius=0.1, resolution=100)
+    v = np.asarray(mesh.vertices) + np.array([0, 0, 0.1])
+    f = np.asarray(mesh.triangles)
+    tip = int(np.argmax(v[:, 0]))
+    v[tip, 0] += 0.015
+    seg = segment_mesh(v, f, SegmentParams.preset('paper', threshold=-10.0))
+    (trimmed,) = measure_rocks(v, seg, MeasureParams(min_faces=1))
+    (whole,) = measure_rocks(v, seg, MeasureParams(min_faces=1, extent_trim=0.0))
+    assert whole.a > 0.204
+    assert abs(trimmed.a - 0.2) < 0.004 and abs(trimmed.b - 0.2) < 0.004

@@ -17,10 +17,13 @@ rule (``completion``):
 * ``"ground"``: the convex hull of the visible surface and its vertical projection onto ``z = 0``
   (a column down to the ground; an upper bound for rocks resting on others).
 
-Dimensions ``a >= b >= c`` are the extents of the completed shape along its principal axes of
-inertia (not an oriented bounding box search). ``fer`` is ``a / c`` (ASTM D4791 style, >= 1), ESD is
-``(6 V / pi)^(1/3)``, sphericity is Wadell's ``(36 pi V^2)^(1/3) / A`` with ``V`` and ``A`` of the
-completed shape. ``visible_fraction`` is the visible surface area over the completed shape's area.
+Dimensions ``a >= b >= c`` are extents along the principal axes of inertia of the completed
+shape (not an oriented bounding box search), measured on the visible surface with the outermost
+``extent_trim`` share of its area cut off at each end of each axis (points of the completion rule
+count as visible surface; see ``MeasureParams.extent_trim`` for why). ``fer`` is ``a / c`` (ASTM
+D4791 style, >= 1), ESD is ``(6 V / pi)^(1/3)``, sphericity is Wadell's ``(36 pi V^2)^(1/3) / A``
+with ``V`` and ``A`` of the completed shape. ``visible_fraction`` is the visible surface area over
+the completed shape's area.
 ``confidence`` in [0, 1] is the product of three factors: ``min(1, visible_fraction / 0.5)``,
 ``min(1, faces / 200)`` and the share of the rim where the search stopped on Eq. 2 (a real concave
 crease) rather than where clean-up merged or cut.
@@ -62,8 +65,14 @@ class MeasureParams:
         completion: Rule for the unseen side, see the module documentation.
         min_faces: Segments with fewer faces are not measured.
         height_bins: Horizontal slices used to find the widest visible section.
-        ground_contact: A rock whose lowest visible point is under this height rests on the ground
-        [m].
+        ground_contact: A rock whose lowest visible point is under this height rests on the
+            ground [m].
+        extent_trim: Share of the surface area left out at each end of each axis when the extents
+            are measured (0: the extreme face centroids). Where rocks touch or hide each other,
+            stereo leaves a fringe of surface up to 2 cm outside the rock (the points that set b
+            lie 5-17 mm outside the true rock on well-reconstructed piles) and the extremes take
+            it whole: on seven reconstructed piles 0.002 took the median b error from 6.4 % to
+            5.4 % and its median sign from +1.8 % to -1.5 %; 0.005 biased b low.
 
     """
 
@@ -72,6 +81,7 @@ class MeasureParams:
     min_faces: int = 20
     height_bins: int = 12
     ground_contact: float = 0.03
+    extent_trim: float = 0.002
 
 
 @dataclass(frozen=True)
@@ -138,7 +148,12 @@ def complete_rock(
     bins: int = 12,
     ground_contact: float = 0.03,
 ) -> F64:
-    """Points whose convex hull is the completed rock (see the module documentation)."""
+    """Points whose convex hull is the completed rock (see the module documentation).
+
+    Returns:
+        ``points`` itself, or ``points`` followed by one transformed copy of them.
+
+    """
     if completion == 'hull' or (completion == 'mirror' and points[:, 2].min() < ground_contact):
         return points
     if completion == 'ground':
@@ -196,11 +211,12 @@ def measure_rocks(
         if len(idx) < p.min_faces:
             continue
         tri = faces_all[idx]
-        used = np.unique(tri)
-        pts = v[used]
-        rim_vertices = _rim_vertices(tri)
+        pts = v[np.unique(tri)]
+        # Face centroids ride along through the completion: they are the area samples the extents
+        # are measured on, and lie inside the vertices' hull.
+        stacked = np.concatenate([pts, seg.geometry.centroids[idx]])
         completed = complete_rock(
-            pts, v[rim_vertices], p.completion, p.height_bins, p.ground_contact
+            stacked, v[_rim_vertices(tri)], p.completion, p.height_bins, p.ground_contact
         )
         try:
             hull = ConvexHull(completed)
@@ -209,8 +225,10 @@ def measure_rocks(
         centroid, axes, volume = solid_axes(hull)
         if volume <= 0:
             continue
-        proj = (hull.points[hull.vertices] - centroid) @ axes
-        a, b, c = (proj.max(axis=0) - proj.min(axis=0)).tolist()
+        copies = len(completed) // len(stacked)
+        samples = completed.reshape(copies, len(stacked), 3)[:, len(pts) :].reshape(-1, 3)
+        weights = np.tile(seg.geometry.areas[idx], copies)
+        a, b, c = _trimmed_extents((samples - centroid) @ axes, weights, p.extent_trim)
         area = float(hull.area)
         visible = float(seg.geometry.areas[idx].sum())
         frac = min(1.0, visible / area)
@@ -236,6 +254,19 @@ def measure_rocks(
             )
         )
     return out
+
+
+def _trimmed_extents(proj: F64, weights: F64, share: float) -> tuple[float, float, float]:
+    """Extent along each column of ``proj`` between the ``share`` and ``1 - share`` quantiles."""
+    order = np.argsort(proj, axis=0)
+    cum = np.cumsum(weights[order], axis=0) / weights.sum()
+    last = len(proj) - 1
+    ext = []
+    for k in range(3):
+        lo = proj[order[min(int(np.searchsorted(cum[:, k], share)), last), k], k]
+        hi = proj[order[min(int(np.searchsorted(cum[:, k], 1.0 - share)), last), k], k]
+        ext.append(float(hi - lo))
+    return ext[0], ext[1], ext[2]
 
 
 def _rim_vertices(tri: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:

@@ -7,13 +7,18 @@ Two presets of :class:`SegmentParams`:
 * ``default``: what measured best against ground truth on reconstructed simulator piles: every face
   within 1 cm of the ground plane that does not face down is ground and is excluded first (Poisson
   rounds the foot of each rock into a skirt that the search would otherwise take into the rock:
-  10-27 % of a rock's area on one pile), ``t = 0.93`` (stricter than the paper's 0.7 and the
-  authors' code's 0.81: Poisson rounds contact creases, and a looser test merges touching rocks),
-  seeds from the most convex faces, then every region under 1 % of the searched faces is a
-  fragment and is merged into the neighbouring region it shares the longest border with;
-  last, neighbouring regions whose union stays convex across their shared border are joined (on
-  reconstructed piles, noise stops the search inside single rocks: this took precision from 0.38
-  to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``).
+  10-27 % of a rock's area on one pile); faces in a concave valley at the scale of a centimetre
+  are kept out of the search too (see ``valley_faces``: where two rocks touch, Poisson bridges the
+  crevice with a surface that is smooth face to face, and the search leaked through it: on seven
+  piles, 21 of its regions had under 85 % of their area on a single rock); ``t = 0.93``
+  (stricter than the paper's 0.7 and the authors' code's 0.81: Poisson rounds contact creases,
+  and a looser test merges touching rocks); seeds from the most convex faces; every region under
+  1 % of the searched faces is a fragment and is merged into the neighbouring region it shares
+  the longest border with; the valley faces are handed back to the regions they border, growing
+  from both sides of a valley until they meet; last, neighbouring regions whose union stays
+  convex across their shared border are joined (on reconstructed piles, noise stops the search
+  inside single rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on
+  another, see ``merge_convex_borders``).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from scipy import sparse
 from scipy.spatial import ConvexHull, QhullError
 
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
@@ -34,9 +40,11 @@ F64 = npt.NDArray[np.float64]
 __all__ = [
     'SegmentParams',
     'Segmentation',
+    'hand_back',
     'merge_convex_borders',
     'merge_fragments',
     'segment_mesh',
+    'valley_faces',
 ]
 
 Mode = Literal['paper', 'default']
@@ -76,6 +84,13 @@ class SegmentParams:
             and no touching rocks; 0.16 began to join touching rocks, 0.05 left splits.
         border_min_edges: Borders shorter than this many face edges are never joined (a corner
             contact says little about the surface between the regions).
+        valley_depth: Faces whose vertices lie deeper than this under their smoothed surroundings
+            are valley faces, kept out of the search and handed back to the regions they border
+            afterwards; 0 disables [m] [0]. On seven reconstructed piles (79 matched rocks) 0.5 mm
+            took recall from 0.86 to 0.90, the median b error from 7.0 % to 5.4 % and the mean
+            D50 error from 9.8 % to 4.3 %; 0.3 mm and 0.7 mm did worse on b or D50.
+        valley_radius: Scale of the smoothed surroundings: the standard deviation of the
+            smoothing kernel [m]. 5 mm and 10 mm measured about as well as 7.5 mm.
 
     """
 
@@ -92,6 +107,8 @@ class SegmentParams:
     merge_convex: bool = True
     border_depth: float = 0.12
     border_min_edges: int = 5
+    valley_depth: float = 0.0005
+    valley_radius: float = 0.0075
 
     @classmethod
     def paper(cls) -> SegmentParams:
@@ -106,6 +123,7 @@ class SegmentParams:
             min_region_faces=0,
             merge_fragments=False,
             merge_convex=False,
+            valley_depth=0.0,
         )
 
     @classmethod
@@ -155,6 +173,67 @@ def _smooth_normals(geom: FaceGeometry, adj: FaceAdjacency, rounds: int) -> npt.
         norm = np.linalg.norm(acc, axis=1, keepdims=True)
         normals = np.where(norm > 0, acc / np.where(norm > 0, norm, 1.0), 0.0)
     return normals
+
+
+def valley_faces(
+    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radius: float, depth: float
+) -> npt.NDArray[np.bool_]:
+    """Faces lying in a concave valley deeper than ``depth`` at the scale ``radius``.
+
+    Each vertex is compared with the average of its neighbourhood, found by rounds of uniform
+    Laplacian smoothing: ``k`` rounds over edges of median length ``e`` spread a vertex with a
+    standard deviation of about ``e sqrt(k / 2)``, so ``k = 2 (radius / e)^2``. A vertex whose
+    smoothed position lies above it along its normal sits in a valley; a face is a valley face
+    when the mean of its vertices' depths exceeds ``depth``. Unlike Eq. 2, which compares
+    neighbouring faces only, this sees a crease that Poisson spread over several faces.
+
+    Args:
+        vertices: Nx3 vertex positions [m].
+        faces: Mx3 triangles.
+        geom: Face normals and areas (the vertex normals are their area-weighted means).
+        radius: Scale of the neighbourhood [m].
+        depth: Depth over which a face is in a valley [m].
+
+    Returns:
+        Per face, whether it lies in a valley.
+
+    """
+    n = len(vertices)
+    weighted = geom.normals * geom.areas[:, None]
+    a = faces.ravel()
+    vn: F64 = np.stack(
+        [np.bincount(a, weights=np.repeat(weighted[:, k], 3), minlength=n) for k in range(3)],
+        axis=1,
+    ).astype(np.float64)
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
+    b = faces[:, [1, 2, 0]].ravel()
+    edge_len = np.linalg.norm(vertices[a] - vertices[b], axis=1)
+    rounds = max(1, round(2.0 * (radius / max(float(np.median(edge_len)), 1e-12)) ** 2))
+    # An interior edge comes once from each of its faces: the matrix only marks neighbours.
+    link = sparse.csr_matrix(
+        (np.ones(2 * len(a)), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n, n)
+    )
+    link.data[:] = 1.0
+    step = sparse.diags(1.0 / np.maximum(np.asarray(link.sum(axis=1)).ravel(), 1.0)) @ link
+    smooth = vertices
+    for _ in range(rounds):
+        smooth = step @ smooth
+    deep = np.einsum('ij,ij->i', smooth - vertices, vn)
+    return np.asarray(deep[faces].mean(axis=1) > depth)
+
+
+def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
+    """Give unlabelled ``free`` faces the label of a labelled neighbour, front by front.
+
+    Every round each free face next to a labelled face takes its label, so a band between two
+    regions is split where the fronts from both sides meet.
+    """
+    labels = labels.copy()
+    while True:
+        take = free[adj.dst] & (labels[adj.dst] == 0) & (labels[adj.src] > 0)
+        if not take.any():
+            return labels
+        labels[adj.dst[take]] = labels[adj.src[take]]
 
 
 def merge_fragments(labels: I32, adj: FaceAdjacency, min_faces: int, merge: bool) -> I32:
@@ -317,6 +396,10 @@ def segment_mesh(
     if p.exclude_ground:
         ground = (geom.centroids[:, 2] < p.ground_tolerance) & (normals[:, 2] >= p.ground_min_nz)
         active &= ~ground
+    valley = np.zeros(m, dtype=bool)
+    if p.valley_depth > 0:
+        valley = valley_faces(v, f, geom, p.valley_radius, p.valley_depth) & active
+        active &= ~valley
     if active.all():
         search = adj
     else:
@@ -347,6 +430,9 @@ def segment_mesh(
     min_faces = max(p.min_region_faces, int(np.ceil(p.min_region_fraction * int(active.sum()))))
     if min_faces > 1:
         labels = merge_fragments(labels, search, min_faces, p.merge_fragments)
+    if valley.any():
+        labels = hand_back(labels, adj, valley)
+        search = adj
     if p.merge_convex:
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
