@@ -31,7 +31,11 @@ from stockpile_ros.segment.criterion import edge_scores  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks  # noqa: E402
 from stockpile_ros.segment.region import grow_regions  # noqa: E402
 from stockpile_ros.segment.scoring import rock_recall_precision  # noqa: E402
-from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh  # noqa: E402
+from stockpile_ros.segment.segmentation import (  # noqa: E402
+    SegmentParams,
+    segment_mesh,
+    valley_faces,
+)
 from stockpile_ros.segment.synthetic import (  # noqa: E402
     make_pile,
     poisson_mesh,
@@ -68,6 +72,10 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
     print(f'paper mode, one core, best of {repeat}: total {total:.2f} s '
           f'(geometry {t_geom:.2f}, adjacency {t_adj:.2f}, Eq. 2 on all edges {t_score:.2f}, '
           f'search {t_grow:.2f}); {fast.max()} regions')  # fmt: skip
+    t_default = best_of(lambda: segment_mesh(v, f, SegmentParams()), repeat)
+    t_valley = best_of(lambda: valley_faces(v, f, g, 0.0075, 0.0005), repeat)
+    print(f'default mode, one core, best of {repeat}: total {t_default:.2f} s '
+          f'(valley test {t_valley:.2f})')  # fmt: skip
     if reference:
         t0 = time.perf_counter()
         slow = reference_bfs(g.centroids, g.normals, adj, t, seeds)

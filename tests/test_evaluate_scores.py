@@ -323,6 +323,9 @@ def test_metric_result_five_percent_too_large(tmp_path: Path, truth: Truth) -> N
         assert _rock_errors(ev, q) == pytest.approx([0.05] * 5, abs=1e-12)
         assert ev['sizes']['summary'][q]['median_abs_pct'] == pytest.approx(5.0, abs=1e-9)
         assert ev['sizes']['summary'][q]['mean_pct'] == pytest.approx(5.0, abs=1e-9)
+        # Rock 5 is 10 % visible: counted in the summary, not in the one over visible rocks.
+        assert ev['sizes']['summary'][q]['n'] == 5
+        assert ev['sizes']['summary_visible'][q]['n'] == 4
     assert _rock_errors(ev, 'volume') == pytest.approx([1.05**3 - 1] * 5, abs=1e-12)
     assert ev['sizes']['volume_mape_pct'] == pytest.approx(15.7625, abs=1e-9)
     assert ev['gradation']['d50_error'] == pytest.approx(0.05, abs=1e-12)

@@ -195,6 +195,10 @@ def evaluate_sides(
     length_factor = 1.0 if result.metric else alignment.scale
     errors = rock_errors(matching.pairs, result.rocks, truth.rocks, alignment, length_factor)
     summary = summarise(errors)
+    threshold = opts.match.visible_threshold
+    summary_visible = summarise(
+        [e for e in errors if e.visible_fraction is None or e.visible_fraction >= threshold]
+    )
     d50_result = None if result.d50 is None else result.d50 * length_factor
     d50_rel = relative_error(d50_result, truth.d50)
     d50_abs = None if d50_result is None or truth.d50 is None else d50_result - truth.d50
@@ -211,6 +215,7 @@ def evaluate_sides(
         'sizes': {
             'length_factor': length_factor,
             'summary': summary,
+            'summary_visible': summary_visible,
             'volume_mape_pct': summary['volume']['mean_abs_pct'],
             'rocks': [_rock_dict(e) for e in errors],
         },

@@ -83,10 +83,15 @@ def _size_lines(sizes: dict[str, Any], rescaled: bool) -> list[str]:
         for q in QUANTITIES:
             row += f' {_num(rock["true"][q], ">11.4g")} {_pct(rock["relative_error"][q]):>8}'
         lines.append(row)
-    for key, label in (('median_abs_pct', 'median |err|'), ('mean_abs_pct', 'mean |err|')):
+    rows = (
+        ('summary', 'median_abs_pct', 'median |err|'),
+        ('summary', 'mean_abs_pct', 'mean |err|'),
+        ('summary_visible', 'median_abs_pct', 'visible: median |err|'),
+    )
+    for group, key, label in rows:
         row = f'{label:>23}'
         for q in QUANTITIES:
-            row += f' {"":>11} {_num(sizes["summary"][q][key], ".2f", " %"):>8}'
+            row += f' {"":>11} {_num(sizes[group][q][key], ".2f", " %"):>8}'
         lines.append(row)
     lines.append(f'  volume MAPE {_num(sizes["volume_mape_pct"], ".2f", " %")}')
     return lines

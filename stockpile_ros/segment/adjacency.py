@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,12 +46,13 @@ class FaceAdjacency:
     i: I64
     j: I64
 
-    @property
+    # Cached: the clean-up steps ask for the directed edges once per round.
+    @functools.cached_property
     def src(self) -> I64:
         """Directed edges' sources: pairs ``i -> j`` first, then ``j -> i``."""
         return np.concatenate([self.i, self.j])
 
-    @property
+    @functools.cached_property
     def dst(self) -> I64:
         """Directed edges' destinations, matching :attr:`src`."""
         return np.concatenate([self.j, self.i])

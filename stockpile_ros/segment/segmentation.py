@@ -229,11 +229,16 @@ def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I
     regions is split where the fronts from both sides meet.
     """
     labels = labels.copy()
+    src, dst = adj.src, adj.dst
+    open_edge = free[dst] & (labels[dst] == 0)
+    src, dst = src[open_edge], dst[open_edge]
     while True:
-        take = free[adj.dst] & (labels[adj.dst] == 0) & (labels[adj.src] > 0)
+        take = labels[src] > 0
         if not take.any():
             return labels
-        labels[adj.dst[take]] = labels[adj.src[take]]
+        labels[dst[take]] = labels[src[take]]
+        left = labels[dst] == 0
+        src, dst = src[left], dst[left]
 
 
 def merge_fragments(labels: I32, adj: FaceAdjacency, min_faces: int, merge: bool) -> I32:
