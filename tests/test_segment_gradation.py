@@ -1,11 +1,15 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.segment.gradation import check_class, gradation, load_class_table, percent_size
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 def test_hand_computed_gradation() -> None:
@@ -23,7 +27,13 @@ def test_hand_computed_gradation() -> None:
     assert g['cu'] == pytest.approx(3.0)
     assert g['cc'] == pytest.approx(0.04 / 0.03)
     assert g['rock_count'] == 4 and g['total_mass'] == pytest.approx(10)
-    assert g['spec'] == {'class': None, 'checked': False, 'passed': None, 'reasons': []}
+    assert g['spec'] == {
+        'class': None,
+        'basis': None,
+        'checked': False,
+        'passed': None,
+        'reasons': [],
+    }
 
 
 def test_undefined_below_the_first_point_and_ties() -> None:
@@ -44,6 +54,7 @@ def test_class_table_and_check() -> None:
     good = {'d15': 9 * inch, 'd50': 12 * inch, 'd85': 17 * inch, 'd100': 20 * inch}
     assert check_class(good, spec) == {
         'class': 'III',
+        'basis': 'mass',
         'checked': True,
         'passed': True,
         'reasons': [],
@@ -53,7 +64,28 @@ def test_class_table_and_check() -> None:
     assert result['passed'] is False
     assert len(result['reasons']) == 2
     assert any('D50' in r and 'above' in r for r in result['reasons'])
-    assert any('D15 undefined' in r for r in result['reasons'])
+    assert any('D15 by mass undefined' in r for r in result['reasons'])
+
+
+def test_a_class_by_count_reads_the_count_curve() -> None:
+    # FP-14 class 1 by count: D15 3-6 in, D50 5-8 in, D85 7-11 in, D100 9-15 in.
+    table = load_class_table(CONFIG / 'fp14_riprap_classes.yaml')
+    assert table['basis'] == 'count' and sorted(table['classes']) == [str(k) for k in range(1, 9)]
+    spec = table['classes']['1']
+    inch = 0.0254
+    # Twenty rocks of 4.5-7.5 in and one 15 in boulder: class 1 by count, while by mass the
+    # boulder carries 40 % of the pile and D85 by mass (11.7 in) is past class 1's D85 by count.
+    sizes = [k * inch for k in np.linspace(4.5, 7.5, 20)] + [15 * inch]
+    masses = [2650 * s**3 for s in sizes]
+    grad = gradation(sizes, masses, spec=spec)
+    assert grad['spec']['basis'] == 'count'
+    assert grad['spec']['passed'] is True, grad['spec']['reasons']
+    assert grad['d85'] > 11 * inch
+    # The same rocks fail against the mass-based class I of the default table (D50 at most
+    # 6.9 in by mass).
+    by_mass = gradation(sizes, masses, spec=load_class_table()['classes']['I'])['spec']
+    assert by_mass['passed'] is False
+    assert any(r.startswith('D50 by mass') and 'above' in r for r in by_mass['reasons'])
 
 
 def test_bad_class_table(tmp_path) -> None:

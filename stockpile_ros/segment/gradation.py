@@ -129,6 +129,9 @@ def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
     factor = {'m': 1.0, 'mm': 1e-3, 'in': 0.0254}.get(str(data.get('units', 'm')))
     if factor is None:
         raise StockpileError(f'{file}: units must be m, mm or in')
+    basis = str(data.get('basis', 'mass'))
+    if basis not in ('mass', 'count'):
+        raise StockpileError(f'{file}: basis must be mass or count')
     classes: dict[str, Any] = {}
     for name, entry in data['classes'].items():
         limits: dict[str, list[float | None]] = {}
@@ -140,9 +143,15 @@ def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
             ):
                 raise StockpileError(f'{file}: class {name}: bad limit {key}: {pair}')
             limits[key] = [None if x is None else float(x) * factor for x in pair]
-        classes[str(name)] = {'name': str(name), 'limits': limits, 'note': entry.get('note', '')}
+        classes[str(name)] = {
+            'name': str(name),
+            'basis': basis,
+            'limits': limits,
+            'note': entry.get('note', ''),
+        }
     return {
         'source': data.get('source', ''),
+        'basis': basis,
         'size_measure': data.get('size_measure', 'b'),
         'classes': classes,
     }
@@ -152,19 +161,26 @@ def check_class(grad: Mapping[str, Any], spec: Mapping[str, Any] | None) -> dict
     """Check a gradation against one class entry: pass when every limit holds.
 
     Args:
-        grad: A gradation dict (needs the ``d..`` keys).
-        spec: ``{"name", "limits": {"d50": [min, max], ...}}`` in metres, ``None`` for an open end.
+        grad: A gradation dict (needs the ``d..`` keys, and ``sizes`` and
+            ``percent_passing_count`` for a class by count).
+        spec: ``{"name", "basis", "limits": {"d50": [min, max], ...}}`` in metres, ``None`` for an
+            open end; ``basis`` is ``"mass"`` (the default: the ``d..`` keys) or ``"count"``
+            (characteristic sizes read off the curve by count).
 
     Returns:
-        ``{"class", "checked", "passed", "reasons"}`` as in report.json.
+        ``{"class", "basis", "checked", "passed", "reasons"}`` as in report.json.
 
     """
     if spec is None:
-        return {'class': None, 'checked': False, 'passed': None, 'reasons': []}
+        return {'class': None, 'basis': None, 'checked': False, 'passed': None, 'reasons': []}
+    basis = spec.get('basis', 'mass')
     reasons: list[str] = []
     for key, (lo, hi) in spec['limits'].items():
-        value = grad.get(key)
-        label = key.upper()
+        if basis == 'count':
+            value = percent_size(grad['sizes'], grad['percent_passing_count'], float(key[1:]))
+        else:
+            value = grad.get(key)
+        label = f'{key.upper()} by {basis}'
         if value is None:
             reasons.append(
                 f'{label} undefined (too few rocks, or the smallest holds too much mass)'
@@ -174,4 +190,10 @@ def check_class(grad: Mapping[str, Any], spec: Mapping[str, Any] | None) -> dict
             reasons.append(f'{label} = {value:.3f} m below the minimum {lo:.3f} m')
         if hi is not None and value > hi:
             reasons.append(f'{label} = {value:.3f} m above the maximum {hi:.3f} m')
-    return {'class': spec['name'], 'checked': True, 'passed': not reasons, 'reasons': reasons}
+    return {
+        'class': spec['name'],
+        'basis': basis,
+        'checked': True,
+        'passed': not reasons,
+        'reasons': reasons,
+    }
