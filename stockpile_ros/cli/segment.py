@@ -25,9 +25,13 @@ search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass, sphe
 pile's gradation, optionally check it against a riprap class, and write the result folder:
 report.json, segments.ply, rocks.csv, gradation.png, render.png, index.html.
 
-Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" excludes the
-ground, uses t = 0.93, seeds from convex faces, merges fragments under 1 % of the faces and joins
-neighbouring regions whose union is convex across their shared border."""
+Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" keeps the
+ground and centimetre-scale valleys out of the search, uses t = 0.93, seeds from convex faces,
+merges fragments under 1 % of the faces, hands the valley faces back to the rocks on either side
+and joins neighbouring regions whose union is convex across their shared border.
+
+Class tables: config/riprap_classes.yaml (NCHRP 568 classes I-X, by mass; the default) and
+config/fp14_riprap_classes.yaml (FHWA FP-14 classes 1-8, by count)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
