@@ -31,6 +31,8 @@ IMAGE = 'camera/image_raw'
 COMPRESSED_SUFFIX = '/compressed'
 CAMERA_INFO = 'camera/camera_info'
 ODOMETRY = 'odom'
+# With /tf_static: where the camera sits on the cart (its offset from the odometry's base frame).
+TF = '/tf'  # tf2_msgs/TFMessage
 TRIGGER = 'stockpile/trigger'  # std_msgs/Empty: reconstruct now (recorded triggers replay)
 RECONSTRUCT_SERVICE = 'stockpile/reconstruct'  # std_srvs/Trigger
 

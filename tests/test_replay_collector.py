@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from stockpile_ros import messages as m
 from stockpile_ros.camera import Frame
+from stockpile_ros.msgs import typestore
 from stockpile_ros.recon.collector import KeyframeCollector, OdometryBuffer, heading_coverage
 from stockpile_ros.recon.keyframes import SelectorOptions
 
@@ -70,3 +72,23 @@ def test_odometry_buffer_nearest_within_gap() -> None:
     assert entry is not None and entry['position'] == [5.0, 2.0, 3.0]
     assert entry['frame_id'] == 'odom'
     assert buf.at(1500) is None
+
+
+def test_odometry_buffer_places_the_camera_with_the_live_transforms() -> None:
+    # base_link at x = 1 facing +y (90 deg about z); the camera 0.5 m ahead of the base on a mast
+    # that rises from 0.2 to 0.4 m between two /tf samples, then a fixed optical frame.
+    f = m.RosbagsFactory(typestore())
+    yaw = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+    buf = OdometryBuffer()
+    buf.push(1000, (1.0, 0.0, 0.0), yaw, 'odom', 'base_link')
+    assert 'camera_position' not in (buf.at(1000, 'camera_optical_frame') or {})
+    level = (0.0, 0.0, 0.0, 1.0)
+    mount = m.transform_stamped(f, 0, 'camera_link', 'camera_optical_frame', (0, 0, 0), level)
+    buf.tree.add(m.tf_message(f, [mount]), static=True, log_ns=0)
+    for stamp, z in ((900, 0.2), (1100, 0.4)):
+        mast = m.transform_stamped(f, stamp, 'base_link', 'camera_link', (0.5, 0.0, z), level)
+        buf.tree.add(m.tf_message(f, [mast]), static=False, log_ns=stamp)
+    entry = buf.at(1000, 'camera_optical_frame')
+    assert entry is not None
+    assert entry['camera_position'] == pytest.approx([1.0, 0.5, 0.3])
+    assert entry['position'] == [1.0, 0.0, 0.0]

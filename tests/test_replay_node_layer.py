@@ -10,7 +10,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / 'stockpile_ros'
 NODES = sorted((PACKAGE / 'nodes').glob('*.py'))
 
 ROS = {'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'std_msgs', 'std_srvs', 'sensor_msgs',
-       'nav_msgs', 'diagnostic_msgs', 'visualization_msgs', 'stockpile_msgs'}  # fmt: skip
+       'nav_msgs', 'tf2_msgs', 'diagnostic_msgs', 'visualization_msgs',
+       'stockpile_msgs'}  # fmt: skip
 # The core components a node may call; everything else (stages, numpy work) stays behind them.
 CORE = {'topics', 'publish', 'runner', 'recon.collector', 'settings', 'bagio.images',
         'bagio.reader', 'camera', 'recon.pipeline'}  # fmt: skip

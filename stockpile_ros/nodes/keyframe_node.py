@@ -1,4 +1,4 @@
-"""Keyframe node: camera (raw or compressed), camera info and odometry in; keyframes stored."""
+"""Keyframe node: camera (raw or compressed), camera info, odometry and tf in; keyframes stored."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from tf2_msgs.msg import TFMessage
 
 from .. import topics
 from ..bagio.images import ImageError, decode_image
@@ -51,6 +52,11 @@ class KeyframeNode(Node):
                                  qos_profile_sensor_data)  # fmt: skip
         self.create_subscription(Odometry, topics.ODOMETRY, self.on_odometry,
                                  qos_profile_sensor_data)  # fmt: skip
+        # The QoS tf2's own listener uses: static transforms are latched.
+        tf_static = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL)  # fmt: skip
+        self.create_subscription(TFMessage, topics.TF_STATIC, self.on_tf_static, tf_static)
+        self.create_subscription(TFMessage, topics.TF, self.on_tf, QoSProfile(depth=100))
 
     def note(self, key: str, level: str, text: str) -> None:
         """Publish a diagnostic and log it, once per ``key``."""
@@ -74,6 +80,14 @@ class KeyframeNode(Node):
         frames = (msg.header.frame_id, msg.child_frame_id)
         self.odometry.push(stamp, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), *frames)
 
+    def on_tf_static(self, msg: TFMessage) -> None:
+        """Keep the cart's fixed transforms (the camera mount)."""
+        self.odometry.tree.add(msg, static=True, log_ns=now_ns(self))
+
+    def on_tf(self, msg: TFMessage) -> None:
+        """Keep the cart's moving transforms (a camera on a moving mast)."""
+        self.odometry.tree.add(msg, static=False, log_ns=now_ns(self))
+
     def on_image(self, msg: Any) -> None:
         """Offer the frame to the collector and publish the status."""
         try:
@@ -92,7 +106,7 @@ class KeyframeNode(Node):
             camera = None
         frame = Frame(stamp, image, msg.header.frame_id, camera, topics.IMAGE,
                       self.collector.state.frames)  # fmt: skip
-        self.collector.push(frame, self.odometry.at(stamp))
+        self.collector.push(frame, self.odometry.at(stamp, msg.header.frame_id))
         self.pubs.publish([keyframe_status(self.f, stamp, self.collector.state)])
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..camera import Frame
 from .keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
+from .transforms import TransformTree, camera_position
 
 __all__ = [
     'HEADING_SECTORS',
@@ -147,7 +148,8 @@ class OdometryBuffer:
     """Recent odometry poses of a live stream, looked up at frame stamps.
 
     The live counterpart of :class:`~stockpile_ros.recon.sources.OdometryTrack`: the nearest pose
-    within ``max_gap_ns`` of the frame (no camera offset: a live node has no transform tree here).
+    within ``max_gap_ns`` of the frame, and the camera centre when ``tree`` (fed from ``/tf_static``
+    and ``/tf``) links the camera's frame to the odometry's moving frame.
 
     Args:
         size: Poses kept.
@@ -157,6 +159,7 @@ class OdometryBuffer:
 
     def __init__(self, size: int = 400, max_gap_ns: int = 200_000_000) -> None:
         self.max_gap_ns = max_gap_ns
+        self.tree = TransformTree()
         self._poses: deque[tuple[int, dict[str, Any]]] = deque(maxlen=size)
 
     def push(
@@ -176,9 +179,23 @@ class OdometryBuffer:
         }
         self._poses.append((int(stamp_ns), entry))
 
-    def at(self, stamp_ns: int) -> dict[str, Any] | None:
+    def at(self, stamp_ns: int, camera_frame: str = '') -> dict[str, Any] | None:
         """Return the ``keyframes.jsonl`` odometry entry nearest ``stamp_ns``, None if too far."""
         if not self._poses:
             return None
         stamp, entry = min(self._poses, key=lambda p: abs(p[0] - stamp_ns))
-        return dict(entry) if abs(stamp - stamp_ns) <= self.max_gap_ns else None
+        if abs(stamp - stamp_ns) > self.max_gap_ns:
+            return None
+        entry = dict(entry)
+        if camera_frame:
+            centre = camera_position(
+                self.tree,
+                entry['position'],
+                entry['orientation_xyzw'],
+                entry['child_frame_id'],
+                camera_frame,
+                stamp_ns,
+            )
+            if centre is not None:
+                entry['camera_position'] = centre
+        return entry

@@ -12,12 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
-import numpy.typing as npt
-from scipy.spatial.transform import Rotation, Slerp
 
 from ..camera import Frame
 from ..errors import StockpileError
+from .transforms import PoseSeries, TransformTree, camera_position
 
 __all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'OdometryTrack', 'iter_frames', 'source_kind']
 
@@ -100,93 +98,6 @@ def iter_frames(source: Path, topic: str | None = None) -> Iterator[Frame]:
         yield from _video(source)
 
 
-def _matrix(position: Any, quat_xyzw: Any) -> npt.NDArray[np.float64]:
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_quat(np.asarray(quat_xyzw, dtype=np.float64)).as_matrix()
-    out[:3, 3] = np.asarray(position, dtype=np.float64)
-    return out
-
-
-@dataclass
-class _PoseSeries:
-    """Poses of one frame over time, interpolated linearly (positions) and by slerp."""
-
-    stamps: npt.NDArray[np.int64]
-    positions: npt.NDArray[np.float64]
-    rotations: Rotation
-
-    @classmethod
-    def build(cls, samples: list[tuple[int, Any, Any]]) -> _PoseSeries:
-        samples = sorted(samples, key=lambda s: s[0])
-        stamps = np.array([s[0] for s in samples], dtype=np.int64)
-        keep = np.concatenate([[True], np.diff(stamps) > 0])
-        kept = [s for s, k in zip(samples, keep, strict=True) if k]
-        return cls(
-            stamps[keep],
-            np.array([s[1] for s in kept], dtype=np.float64).reshape(-1, 3),
-            Rotation.from_quat(np.array([s[2] for s in kept], dtype=np.float64).reshape(-1, 4)),
-        )
-
-    def at(self, stamp_ns: int, max_gap_ns: int) -> tuple[npt.NDArray[np.float64], Rotation] | None:
-        k = int(np.searchsorted(self.stamps, stamp_ns))
-        if k < len(self.stamps) and self.stamps[k] == stamp_ns:
-            return self.positions[k], self.rotations[k]
-        if k == 0 or k == len(self.stamps) or self.stamps[k] - self.stamps[k - 1] > max_gap_ns:
-            return None
-        w = (stamp_ns - self.stamps[k - 1]) / (self.stamps[k] - self.stamps[k - 1])
-        position = (1 - w) * self.positions[k - 1] + w * self.positions[k]
-        times = self.stamps[k - 1 : k + 1].astype(np.float64)
-        return position, Slerp(times, self.rotations[k - 1 : k + 1])(float(stamp_ns))
-
-
-class _TransformTree:
-    """The ``/tf_static`` and ``/tf`` edges of a bag below the odometry's moving frame."""
-
-    def __init__(self, bag: Path, skip_child: str) -> None:
-        from ..bagio.reader import read_messages
-
-        self.static: dict[str, tuple[str, npt.NDArray[np.float64]]] = {}
-        moving: dict[str, tuple[str, list[tuple[int, Any, Any]]]] = {}
-        for topic in ('/tf_static', '/tf'):
-            try:
-                for _, _, log_ns, msg in read_messages(bag, [topic]):
-                    for tf in msg.transforms:
-                        child = tf.child_frame_id.lstrip('/')
-                        parent = tf.header.frame_id.lstrip('/')
-                        t, q = tf.transform.translation, tf.transform.rotation
-                        pos, quat = [t.x, t.y, t.z], [q.x, q.y, q.z, q.w]
-                        if topic == '/tf_static':
-                            self.static[child] = (parent, _matrix(pos, quat))
-                        elif child != skip_child:
-                            stamp = tf.header.stamp.sec * 1_000_000_000 + tf.header.stamp.nanosec
-                            moving.setdefault(child, (parent, []))[1].append(
-                                (stamp or log_ns, pos, quat)
-                            )
-            except StockpileError:
-                continue
-        self.moving = {c: (p, _PoseSeries.build(s)) for c, (p, s) in moving.items()}
-
-    def chain(self, parent: str, child: str, stamp_ns: int) -> npt.NDArray[np.float64] | None:
-        """4x4 transform ``child`` -> ``parent`` at ``stamp_ns``; None when not connected."""
-        out = np.eye(4)
-        frame = child.lstrip('/')
-        for _ in range(len(self.static) + len(self.moving) + 1):
-            if frame == parent:
-                return out
-            if frame in self.static:
-                frame, step = self.static[frame]
-            elif frame in self.moving:
-                frame, series = self.moving[frame]
-                pose = series.at(stamp_ns, 200_000_000)
-                if pose is None:
-                    return None
-                step = _matrix(pose[0], pose[1].as_quat())
-            else:
-                return None
-            out = step @ out
-        return None
-
-
 @dataclass
 class OdometryTrack:
     """Odometry of a bag, interpolated at keyframe stamps.
@@ -200,11 +111,11 @@ class OdometryTrack:
 
     """
 
-    poses: _PoseSeries
+    poses: PoseSeries
     frame_id: str
     child_frame_id: str
     camera_frame: str
-    tree: _TransformTree
+    tree: TransformTree
 
     @classmethod
     def from_bag(cls, bag: Path, camera_frame: str) -> OdometryTrack | None:
@@ -216,11 +127,11 @@ class OdometryTrack:
             return None
         base = poses[0].child_frame_id
         return cls(
-            poses=_PoseSeries.build([(p.stamp_ns, p.position, p.orientation_xyzw) for p in poses]),
+            poses=PoseSeries.build([(p.stamp_ns, p.position, p.orientation_xyzw) for p in poses]),
             frame_id=poses[0].frame_id,
             child_frame_id=base,
             camera_frame=camera_frame,
-            tree=_TransformTree(bag, skip_child=base),
+            tree=TransformTree.from_bag(bag, skip_child=base),
         )
 
     def at(self, stamp_ns: int, max_gap_ns: int = 200_000_000) -> dict[str, Any] | None:
@@ -235,8 +146,10 @@ class OdometryTrack:
             'frame_id': self.frame_id,
             'child_frame_id': self.child_frame_id,
         }
-        base_to_camera = self.tree.chain(self.child_frame_id, self.camera_frame, stamp_ns)
-        if base_to_camera is not None:
-            cam = _matrix(position, rotation.as_quat()) @ base_to_camera
-            entry['camera_position'] = [float(v) for v in cam[:3, 3]]
+        quat = rotation.as_quat()
+        centre = camera_position(
+            self.tree, position, quat, self.child_frame_id, self.camera_frame, stamp_ns
+        )
+        if centre is not None:
+            entry['camera_position'] = centre
         return entry
