@@ -36,6 +36,7 @@ from .segment.pipeline import Analysis
 __all__ = [
     'DIAGNOSTIC_PREFIX',
     'Publication',
+    'capture_warnings',
     'diagnostics',
     'keyframe_status',
     'reconstruction_diagnostics',
@@ -104,6 +105,11 @@ def diagnostics(
         'values': values or {},
     }
     return topics.DIAGNOSTICS, diagnostic_array(f, stamp_ns, [entry])
+
+
+def capture_warnings(f: MessageFactory, stamp_ns: int, report: dict[str, Any]) -> list[Publication]:
+    """One ``stockpile/capture`` WARN diagnostic per warning of a report."""
+    return [diagnostics(f, stamp_ns, 'capture', 'WARN', t) for t in report.get('warnings', [])]
 
 
 def _stage_values(stage: str, result: dict[str, Any]) -> tuple[str, str, dict[str, Any]]:

@@ -30,6 +30,7 @@ from .errors import StockpileError
 from .progress import progress
 from .publish import (
     Publication,
+    capture_warnings,
     diagnostics,
     keyframe_status,
     reconstruction_diagnostics,
@@ -160,6 +161,8 @@ class _Replay:
             return
         report = seg.analysis.report
         s.report = report
+        s.problems.extend(report['warnings'])
+        self.emit(stamp_ns, capture_warnings(f, stamp_ns, report))
         self.emit(
             stamp_ns,
             segmentation_outputs(f, stamp_ns, seg.analysis, self.settings.frame_id, self.max_faces),

@@ -1,12 +1,18 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 from segment_fixtures import small_pile
 
+from stockpile_ros import messages as m
+from stockpile_ros import topics
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+from stockpile_ros.msgs import typestore
+from stockpile_ros.publish import capture_warnings
+from stockpile_ros.segment.measure import RockMeasure, visibility_warnings
 
 ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',
              'visible_fraction', 'fer', 'sphericity', 'confidence'}  # fmt: skip
@@ -45,6 +51,7 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     assert spec['class'] == 'I' and spec['checked'] and isinstance(spec['passed'], bool)
     assert report['segmentation']['mode'] == 'default'
     assert report['mesh']['faces'] == len(f)
+    assert isinstance(report['warnings'], list)
     seg = read_labelled_mesh(out / 'segments.ply')
     assert len(seg.faces) == len(f)
     assert set(np.unique(seg.labels)) >= {r['id'] for r in report['rocks']}
@@ -71,3 +78,18 @@ def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
 def test_cli_errors_are_messages(tmp_path, capsys) -> None:
     assert main(['segment', str(tmp_path / 'missing.ply'), '--out', str(tmp_path / 'o')]) == 2
     assert 'no such mesh' in capsys.readouterr().err
+
+
+def test_partly_seen_rocks_raise_a_capture_warning() -> None:
+    base = RockMeasure(id=1, centroid=(0.0, 0.0, 0.1), a=0.2, b=0.1, c=0.05, esd=0.1,
+                       volume=1e-3, mass=2.65, visible_area=0.01, visible_fraction=0.6, fer=4.0,
+                       sphericity=0.8, confidence=0.5, faces=100)  # fmt: skip
+    rocks = [replace(base, id=k, visible_fraction=v) for k, v in enumerate((0.6, 0.7, 0.3, 0.8), 1)]
+    # One rock in four seen on under 45 %: no warning.
+    assert visibility_warnings(rocks) == []
+    rocks.append(replace(base, id=5, visible_fraction=0.44))
+    (text,) = visibility_warnings(rocks)
+    assert text.startswith('2 of 5 rocks') and '(ids 3, 5)' in text
+    ((topic, msg),) = capture_warnings(m.RosbagsFactory(typestore()), 0, {'warnings': [text]})
+    assert topic == topics.DIAGNOSTICS
+    assert msg.status[0].name == 'stockpile/capture' and msg.status[0].message == text

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -115,4 +116,6 @@ def run(args: argparse.Namespace) -> int:
     if g['spec']['checked']:
         verdict = 'PASS' if g['spec']['passed'] else 'FAIL: ' + '; '.join(g['spec']['reasons'])
         print(f'class {g["spec"]["class"]}: {verdict}')
+    for text in analysis.report['warnings']:
+        print(f'stockpile segment: warning: {text}', file=sys.stderr)
     return 0

@@ -10,7 +10,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from .. import topics
-from ..publish import diagnostics, segmentation_outputs, status
+from ..publish import capture_warnings, diagnostics, segmentation_outputs, status
 from ..runner import run_segmentation
 from .common import (
     LATCHED,
@@ -73,6 +73,9 @@ class SegmentationNode(Node):
             )
         )
         rocks = len(report['rocks'])
+        if report['warnings']:
+            self.get_logger().warning(' '.join(report['warnings']))
+        self.pubs.publish(capture_warnings(f, stamp_ns, report))
         self.pubs.publish([
             diagnostics(f, stamp_ns, 'segment', 'OK', f'{rocks} rocks',
                         {'rocks': rocks, 'd50': report['gradation'].get('d50')}),

@@ -47,12 +47,19 @@ __all__ = [
     'complete_rock',
     'measure_rocks',
     'solid_axes',
+    'visibility_warnings',
 ]
 
 Completion = Literal['mirror', 'ground', 'hull']
 F64 = npt.NDArray[np.float64]
 
 WATER_DENSITY = 1000.0  # kg/m^3
+
+#: Visible fraction under which a rock's size is a lower bound: on seven reconstructed simulator
+#: piles, rocks estimated under 0.45 came out with b a median 17-21 % small, the rest within 4 %.
+PARTLY_SEEN = 0.45
+#: Share of partly seen rocks over which the capture is reported as too one-sided.
+PARTLY_SEEN_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -275,3 +282,15 @@ def _rim_vertices(tri: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
     edges = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     uniq, count = np.unique(edges, axis=0, return_counts=True)
     return np.unique(uniq[count == 1])
+
+
+def visibility_warnings(rocks: list[RockMeasure]) -> list[str]:
+    """Warnings for report.json when too many rocks were seen on too little of their surface."""
+    partly = [r for r in rocks if r.visible_fraction < PARTLY_SEEN]
+    if not rocks or len(partly) <= PARTLY_SEEN_SHARE * len(rocks):
+        return []
+    return [
+        f'{len(partly)} of {len(rocks)} rocks were seen on under {PARTLY_SEEN:.0%} of their '
+        f'surface (ids {", ".join(str(r.id) for r in partly)}): their sizes are lower bounds, '
+        'about a fifth small on simulated piles. Capture the pile from more sides or heights.'
+    ]

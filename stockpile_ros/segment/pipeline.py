@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from .gradation import gradation
-from .measure import MeasureParams, RockMeasure, measure_rocks
+from .measure import MeasureParams, RockMeasure, measure_rocks, visibility_warnings
 from .segmentation import Segmentation, SegmentParams, segment_mesh
 
 __all__ = ['Analysis', 'analyse_mesh', 'json_safe']
@@ -105,14 +105,13 @@ def analyse_mesh(
             'rocks_measured': len(rocks),
             'seconds': round(t1 - t0, 3),
             'measure': {
-                'specific_gravity': mp.specific_gravity,
-                'completion': mp.completion,
-                'min_faces': mp.min_faces,
-                'ground_contact': mp.ground_contact,
-                'dimensions': 'extents along the principal axes of inertia of the completed rock',
+                **asdict(mp),
+                'dimensions': 'extents along the principal axes of inertia of the completed rock, '
+                'the outermost extent_trim of the surface area left out at each end',
                 'fer': 'a / c',
             },
         },
+        'warnings': visibility_warnings(rocks),
         'mesh': {'faces': len(f), 'vertices': len(v), 'source': source},
     }
     return Analysis(v, f, colors, seg, rocks, json_safe(report))

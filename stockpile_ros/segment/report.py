@@ -100,6 +100,10 @@ def _html(report: dict[str, Any], grad_png: bytes, view_png: bytes) -> str:
     ds = ', '.join(f'D{p} = {_fmt(g.get(f"d{p}"))} m' for p in (10, 15, 30, 50, 60, 85, 100))
     scale = report['scale']
     seg = report['segmentation']
+    warnings = ''.join(
+        f'<p style="color:#b35900"><b>Warning:</b> {html.escape(w)}</p>'
+        for w in report.get('warnings', [])
+    )
     b64 = base64.b64encode
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>Stockpile report</title>
@@ -114,6 +118,7 @@ Segmentation mode <code>{html.escape(str(seg.get('mode')))}</code>, threshold
 <code>{html.escape(report['frame_id'])}</code>,
 units m, kg.</p>
 <p>Specification: {verdict}</p>
+{warnings}
 <p>{ds}; Cu = {_fmt(g.get('cu'), 2)}, Cc = {_fmt(g.get('cc'), 2)}.</p>
 <h2>Segmented pile</h2>
 <img alt="segmented pile" src="data:image/png;base64,{b64(view_png).decode()}">
