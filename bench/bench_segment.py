@@ -94,7 +94,7 @@ def quality(name: str, v, f, points, point_labels, truth_rocks: dict | None) -> 
         line = f'{name} {mode:7s}: mean rock recall {r:.3f} precision {p:.3f} '
         line += f'(worst {rr.min():.2f} / {pp.min():.2f}), {seg.labels.max()} segments'
         if truth_rocks and mode == 'default':
-            for comp in ('hull', 'mirror', 'ground'):
+            for comp in ('auto', 'hull', 'mirror', 'ground'):
                 eb, ev = [], []
                 for rock in measure_rocks(v, seg, MeasureParams(completion=comp)):
                     sel = seg.labels == rock.id

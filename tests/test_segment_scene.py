@@ -96,3 +96,28 @@ def test_a_fringe_outside_the_rock_does_not_set_its_size() -> None:
     (whole,) = measure_rocks(v, seg, MeasureParams(min_faces=1, extent_trim=0.0))
     assert whole.a > 0.204
     assert abs(trimmed.a - 0.2) < 0.004 and abs(trimmed.b - 0.2) < 0.004
+
+
+def test_auto_completion_mirrors_only_rocks_seen_on_little_of_their_hull() -> None:
+    # Upper half of a ball off the ground: seen on 2/3 of its hull (the flat base is the rest),
+    # closed flat. A 45 degree wedge of that half: seen on under 0.3 of its hull, mirrored.
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius=0.1, resolution=40)
+    v = np.asarray(mesh.vertices) + np.array([0, 0, 0.15])
+    f = np.asarray(mesh.triangles)
+    c = v[f].mean(axis=1)
+    params = SegmentParams.preset('paper', threshold=-10.0)
+    for part, expected in (
+        (c[:, 2] > 0.15, 'hull'),
+        ((c[:, 2] > 0.15) & (c[:, 0] > 0) & (c[:, 1] > c[:, 0]), 'mirror'),
+    ):
+        seg = segment_mesh(v, f[part], params)
+        (auto,) = measure_rocks(v, seg, MeasureParams(completion='auto'))
+        (fixed,) = measure_rocks(v, seg, MeasureParams(completion=expected))
+        (other,) = measure_rocks(
+            v, seg, MeasureParams(completion='hull' if expected == 'mirror' else 'mirror')
+        )
+        assert auto.volume == fixed.volume != other.volume, expected
+        # Sizes are measured on what was seen, whatever closes the rock.
+        assert (auto.a, auto.b, auto.c) == (other.a, other.b, other.c)

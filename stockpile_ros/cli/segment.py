@@ -49,8 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         '--class-table', type=Path, help='class table YAML (default config/riprap_classes.yaml)'
     )
     parser.add_argument('--specific-gravity', type=float, default=2.65)
-    parser.add_argument('--completion', choices=('hull', 'mirror', 'ground'), default='hull',
-                        help='rule for the unseen side of each rock')  # fmt: skip
+    parser.add_argument('--completion', choices=('auto', 'hull', 'mirror', 'ground'),
+                        default='auto', help='rule for the unseen side of each rock (volume, '
+                        'mass): auto mirrors rocks seen as caps, closes others flat')  # fmt: skip
 
 
 def _read_mesh(path: Path) -> LabelledMesh:
