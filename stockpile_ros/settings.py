@@ -141,6 +141,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     'poisson.max_distance': (0.0, 1000.0),
     'poisson.margin': (0.0, 1.0),
     'poisson.target_faces': (0, 100_000_000),
+    'poisson.threads': (0, 1024),
     'recon.crop_radius': (0.0, 100.0),
     'recon.odometry_tolerance': (0.0, 10.0),
     'segment.threshold': (-1.0, 2.0),
