@@ -182,9 +182,12 @@ def check_class(grad: Mapping[str, Any], spec: Mapping[str, Any] | None) -> dict
             value = grad.get(key)
         label = f'{key.upper()} by {basis}'
         if value is None:
-            reasons.append(
-                f'{label} undefined (too few rocks, or the smallest holds too much mass)'
+            why = (
+                'too few rocks'
+                if basis == 'count'
+                else 'too few rocks, or the smallest holds too much mass'
             )
+            reasons.append(f'{label} undefined ({why})')
             continue
         if lo is not None and value < lo:
             reasons.append(f'{label} = {value:.3f} m below the minimum {lo:.3f} m')

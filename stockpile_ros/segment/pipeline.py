@@ -106,8 +106,8 @@ def analyse_mesh(
             'seconds': round(t1 - t0, 3),
             'measure': {
                 **asdict(mp),
-                'dimensions': 'extents along the principal axes of inertia of the completed rock, '
-                'the outermost extent_trim of the surface area left out at each end',
+                'dimensions': 'extents of the visible surface along the principal axes of inertia '
+                'of its convex hull, the outermost extent_trim of its area left out at each end',
                 'fer': 'a / c',
             },
         },

@@ -125,9 +125,9 @@ units m, kg.</p>
 <h2>Gradation</h2>
 <img alt="gradation curve" src="data:image/png;base64,{b64(grad_png).decode()}">
 <h2>Rocks</h2><p>Sizes in m, volume in m&sup3;, mass in kg, area in m&sup2;.
-a &ge; b &ge; c along the principal axes of the completed rock; fer = a / c; unseen sides
-completed as
-documented in report.json (segmentation.measure).</p>
+a &ge; b &ge; c measured on the visible surface (lower bounds for partly hidden rocks); fer = a / c;
+the unseen side, for volume and mass, completed as documented in report.json
+(segmentation.measure).</p>
 <table><tr>{head}</tr>{rows}</table></body></html>
 """
 
