@@ -130,6 +130,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     'dense.work_width': (64, 16384),
     'dense.stride': (1, 64),
     'dense.pair_window': (1, 100),
+    'dense.partners': (1, 8),
     'dense.target_baseline': (0.0, 10.0),
     'dense.check_window': (0, 100),
     'dense.min_agree': (0, 100),

@@ -8,7 +8,7 @@ import open3d as o3d
 from recon_synth import look_at, render, scene_mesh
 
 from stockpile_ros.camera import CameraModel
-from stockpile_ros.recon.dense import DenseOptions, _pair_depth
+from stockpile_ros.recon.dense import DenseOptions, _depth_stats, _pair_depth, _pick_partners
 from stockpile_ros.recon.sfm import SparseModel, View
 
 
@@ -40,3 +40,25 @@ def test_depth_of_ground_seen_obliquely_is_unbiased(tmp_path: Path) -> None:
     rel = dist[np.isfinite(true)] / true[np.isfinite(true)] - 1.0
     assert abs(float(np.median(rel))) < 0.002
     assert float(np.percentile(np.abs(rel), 75)) < 0.01
+
+
+def test_partners_are_taken_on_both_sides_where_there_are_any() -> None:
+    # Nine views 0.2 m apart on a straight pass 2 m from the pile: the target baseline (a quarter
+    # of the depth) is about two steps.
+    cam = CameraModel.from_fov(640, 480, 60.0)
+    pile = np.random.default_rng(1).uniform([-0.5, -0.3, 0.0], [0.5, 0.3, 0.4], (300, 3))
+    views = []
+    for i in range(9):
+        x = -0.8 + 0.2 * i
+        rot, trans = look_at(np.array([x, -2.0, 0.6]), np.array([x, 0.0, 0.0]))
+        views.append(View(f'{i}.png', cam, rot, trans, np.arange(300)))
+    model = SparseModel(
+        {v.name: v for v in views}, np.arange(300), pile, np.zeros((300, 3), np.uint8)
+    )
+    stats = [_depth_stats(v, model) for v in views]
+    one, two = DenseOptions(partners=1), DenseOptions(partners=2)
+    middle = _pick_partners(4, views, stats, two)
+    assert middle[:1] == _pick_partners(4, views, stats, one)
+    assert len(middle) == 2 and min(middle) < 4 < max(middle)
+    first = _pick_partners(0, views, stats, two)
+    assert len(first) == 2 and min(first) > 0

@@ -12,6 +12,7 @@ from stockpile_ros.recon.scale import (
     TargetSpec,
     combine,
     detect_charuco,
+    off_path,
     scale_from_odometry,
     scale_from_target,
 )
@@ -135,6 +136,24 @@ def test_odometry_needs_a_path() -> None:
     still = np.zeros((10, 3))
     centres = {int(s): np.random.default_rng(0).normal(size=3) for s in stamps}
     assert scale_from_odometry(centres, stamps, still) is None
+
+
+def test_off_path_finds_misregistered_keyframes_only() -> None:
+    rng = np.random.default_rng(2)
+    # Two passes along 4 m at two heights, 40 keyframes; the model is scaled, turned and shifted.
+    x = np.concatenate([np.linspace(-2, 2, 20), np.linspace(2, -2, 20)])
+    odom = np.column_stack([x, np.full(40, -1.0), np.repeat([1.0, 1.5], 20)])
+    rot = _rotation(rng)
+    model = (odom + rng.normal(0, 0.01, odom.shape)) @ rot / 0.3 + [3.0, 0.0, 1.0]
+    assert not off_path(model, odom, floor=0.2).any()
+    # Registered on repeating texture: the last two keyframes land 3 m from where the cart was.
+    wrong = model.copy()
+    wrong[-2:] += np.array([3.0, 1.0, 0.0]) @ rot / 0.3
+    assert np.flatnonzero(off_path(wrong, odom, floor=0.2)).tolist() == [38, 39]
+    # When half the path disagrees nothing is singled out.
+    half = model.copy()
+    half[20:] += np.array([3.0, 1.0, 0.0]) @ rot / 0.3
+    assert not off_path(half, odom, floor=0.2).any()
 
 
 def test_combine() -> None:

@@ -73,6 +73,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     d = parser.add_argument_group('dense and surface')
     dd, pp = DenseOptions(), PoissonOptions()
     d.add_argument('--dense-width', type=int, default=dd.work_width, help='stereo width [px]')
+    d.add_argument(
+        '--dense-partners',
+        type=int,
+        default=dd.partners,
+        help='depth maps per keyframe, each with its own partner view (1: faster)',
+    )
     d.add_argument('--poisson-depth', type=int, default=pp.depth)
     d.add_argument('--trim-quantile', type=float, default=pp.density_quantile)
     d.add_argument('--target-faces', type=int, default=pp.target_faces, help='0: no simplifying')
@@ -96,7 +102,7 @@ def _options(args: argparse.Namespace) -> ReconOptions:
             num_threads=args.threads,
             use_camera_info=not args.self_calibrate,
         ),
-        dense=DenseOptions(work_width=args.dense_width),
+        dense=DenseOptions(work_width=args.dense_width, partners=args.dense_partners),
         poisson=PoissonOptions(
             depth=args.poisson_depth,
             density_quantile=args.trim_quantile,

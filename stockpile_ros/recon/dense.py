@@ -1,12 +1,13 @@
 """Dense coloured point cloud with oriented normals from the registered keyframes, on the CPU.
 
-Each keyframe is paired with a nearby keyframe at a useful baseline; the pair is rectified
+Each keyframe is paired with a nearby keyframe at a useful baseline (or with several, one on each
+side of it in capture order where it can be: ``DenseOptions.partners``); each pair is rectified
 (``cv2.stereoRectify``, vertical pairs transposed, right-to-left pairs mirrored) and matched with
 semi-global block matching (four symmetric paths) over the disparity range the sparse points
-predict. Every depth map is then checked against the depth maps of neighbouring keyframes (each
-from its own pair): a point is kept only where another view sees the same surface at the same
-depth. The survivors are fused on a voxel grid; normals are estimated from neighbours and turned
-towards the cameras that saw them.
+predict. Every depth map is then checked against the other depth maps of its keyframe and of the
+neighbouring keyframes (each from its own pair): a point is kept only where another pair sees the
+same surface at the same depth. The survivors are fused on a voxel grid; normals are estimated
+from neighbours and turned towards the cameras that saw them.
 With a CUDA build of pycolmap, COLMAP's PatchMatch stereo and fusion are used instead.
 """
 
@@ -41,6 +42,12 @@ class DenseOptions:
         work_width: Width [px] keyframes are downscaled to for stereo matching.
         stride: Every ``stride``-th pixel (in both directions) becomes a point.
         pair_window: Partners are searched among this many keyframes before and after.
+        partners: Depth maps per keyframe, each from its own partner view (see
+            ``_pick_partners``). On eleven simulated piles two took the share of the visible
+            rock surface that was reconstructed from 0.80 to 0.83 on average (most at the ends
+            of a pass, which only the first or last few keyframes see) and found one more rock
+            of 132, for twice the stereo time; the gradation did not get better (mean D50 error
+            3.7 % -> 5.8 %, volume error 27 % -> 31 %, both within the pile-to-pile spread).
         target_baseline: Preferred baseline as a share of the median scene depth.
         check_window: Depth maps of this many keyframes on each side check a point.
         min_agree: Other depth maps that must agree with a point.
@@ -54,6 +61,7 @@ class DenseOptions:
     work_width: int = 1280
     stride: int = 2
     pair_window: int = 30
+    partners: int = 1
     target_baseline: float = 0.25
     check_window: int = 3
     min_agree: int = 1
@@ -108,20 +116,23 @@ def _depth_stats(view: View, model: SparseModel) -> tuple[float, float]:
     return float(np.median(z)), float(1.3 / near - 0.7 / far)
 
 
-def _pick_partner(
+def _pick_partners(
     i: int, views: list[View], stats: list[tuple[float, float]], options: DenseOptions
-) -> int | None:
-    """Index of the view to pair with ``views[i]``: closest to the target baseline ratio.
+) -> list[int]:
+    """Return the indices of the ``options.partners`` views to pair with ``views[i]``, best first.
 
-    Baselines short enough for the scene's disparity range (with the margins of
-    :func:`_pair_depth`) to fit the matcher's 256 disparities are preferred: a deep scene (a low
-    camera looking across the ground) needs a short one. When no neighbour is that close the
-    best of the others is taken: the pile, nearer than the far ground, is then still in range.
+    The first is the one closest to the target baseline ratio, the next ones the closest on the
+    other side in capture order where there is one: seen from both sides, a rock's flanks that
+    one partner hides are in the other's view. Baselines short enough for the scene's disparity
+    range (with the margins of :func:`_pair_depth`) to fit the matcher's 256 disparities are
+    preferred: a deep scene (a low camera looking across the ground) needs a short one. When no
+    neighbour is that close the best of the others is taken: the pile, nearer than the far
+    ground, is then still in range.
     """
     depth, span = stats[i]
     width = min(options.work_width, views[i].camera.width)
     max_baseline = 240.0 / (views[i].camera.fx * width / views[i].camera.width * span)
-    best: dict[bool, tuple[float, int]] = {}
+    ranked: list[tuple[bool, float, int]] = []
     for j in range(max(0, i - options.pair_window), min(len(views), i + options.pair_window + 1)):
         if j == i:
             continue
@@ -131,13 +142,13 @@ def _pick_partner(
         if not 0.02 <= ratio <= 0.6 or axes < np.cos(np.radians(40)):
             continue
         cost = abs(float(np.log(ratio / options.target_baseline)))
-        fits = baseline <= max_baseline
-        if fits not in best or cost < best[fits][0]:
-            best[fits] = (cost, j)
-    for fits in (True, False):
-        if fits in best:
-            return best[fits][1]
-    return None
+        ranked.append((baseline > max_baseline, cost, j))
+    ranked.sort()
+    if not ranked:
+        return []
+    first = ranked[0][2]
+    rest = sorted(ranked[1:], key=lambda r: ((r[2] > i) == (first > i), r[0], r[1]))
+    return [first] + [j for _, _, j in rest[: options.partners - 1]]
 
 
 def _pair_depth(
@@ -274,37 +285,36 @@ def dense_cloud(
     depth_stats = [_depth_stats(v, model) for v in views]
     depths = [s[0] for s in depth_stats]
     cache: dict[str, npt.NDArray[np.uint8]] = {}
-    maps: dict[int, DepthView | None] = {}
+    maps: dict[int, list[DepthView]] = {}
     points, colors, centres = [], [], []
     raw, made, w = 0, 0, options.check_window
 
     def check(i: int) -> None:
-        """Keep the points of depth map ``i`` that neighbouring depth maps agree with."""
-        dv = maps[i]
-        if dv is None:
-            return
-        agree = np.zeros(len(dv.points), dtype=np.int64)
-        for k in range(i - w, i + w + 1):
-            other = maps.get(k)
-            if k != i and other is not None:
-                agree += _agreement(dv, other, options.depth_tolerance)
-        keep = agree >= options.min_agree
-        points.append(dv.points[keep])
-        colors.append(dv.colors[keep])
-        centres.append(np.broadcast_to(dv.view.center, (int(keep.sum()), 3)))
+        """Keep the points of the depth maps of view ``i`` that other depth maps agree with."""
+        for n, dv in enumerate(maps[i]):
+            agree = np.zeros(len(dv.points), dtype=np.int64)
+            for k in range(i - w, i + w + 1):
+                for m, other in enumerate(maps.get(k, [])):
+                    if (k, m) != (i, n):
+                        agree += _agreement(dv, other, options.depth_tolerance)
+            keep = agree >= options.min_agree
+            points.append(dv.points[keep])
+            colors.append(dv.colors[keep])
+            centres.append(np.broadcast_to(dv.view.center, (int(keep.sum()), 3)))
 
-    # Streamed: a depth map is checked once its last neighbour exists and dropped once no
-    # later map needs it, so memory holds 2 w + 1 maps whatever the number of keyframes.
+    # Streamed: a view's depth maps are checked once the last neighbour's exist and dropped once
+    # no later view needs them, so memory holds 2 w + 1 views' maps whatever the number of
+    # keyframes.
     for i in progress(range(len(views)), 'stereo', unit='view'):
-        j = _pick_partner(i, views, depth_stats, options) if np.isfinite(depths[i]) else None
-        dv = (
-            None if j is None else _pair_depth(image_dir, views[i], views[j], model, options, cache)
+        partners = _pick_partners(i, views, depth_stats, options) if np.isfinite(depths[i]) else []
+        pair_maps = (
+            _pair_depth(image_dir, views[i], views[j], model, options, cache) for j in partners
         )
-        maps[i] = dv
-        if dv is not None:
-            raw += len(dv.points)
+        maps[i] = [dv for dv in pair_maps if dv is not None]
+        if maps[i]:
             made += 1
-            f_work = float(dv.k[0, 0])
+            f_work = float(maps[i][0].k[0, 0])
+        raw += sum(len(dv.points) for dv in maps[i])
         if i - w >= 0:
             check(i - w)
         maps.pop(i - 2 * w, None)

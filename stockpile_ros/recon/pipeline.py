@@ -31,6 +31,7 @@ from .scale import (
     TargetSpec,
     combine,
     detect_charuco,
+    off_path,
     scale_from_odometry,
     scale_from_target,
 )
@@ -51,6 +52,8 @@ __all__ = [
     'run_sfm_stage',
 ]
 
+F64 = npt.NDArray[np.float64]
+
 STAGES = ('keyframes', 'sfm', 'dense', 'mesh')
 
 
@@ -67,7 +70,9 @@ class ReconOptions:
         target: The ChArUco board in view, None when there is none.
         use_odometry: Scale from the bag's odometry when it has some.
         odometry_tolerance: Odometry is not used for the scale when the keyframe path, scaled
-            onto it, differs from it by more than this share of its extent (rms).
+            onto it, differs from it by more than this share of its extent (rms). A keyframe
+            further than this share from where odometry puts it, after the fit to the others, is
+            left out of the dense and mesh stages (see ``on_path``).
         crop_radius: Points farther (horizontally) from the pile centre than this multiple of
             the pile's radius (95 % of what rises above a tenth of its height) are left out of the
             surface,
@@ -169,9 +174,52 @@ def run_dense_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
     if not (work.sparse / 'sparse.json').exists():
         raise StockpileError(f'{work.sparse}: no sparse model; run the sfm stage first')
     store = KeyframeStore(work.keyframes)
-    model = load_sparse(work.sparse)
+    model, dropped = on_path(work, load_sparse(work.sparse), options)
     order = [r.file for r in store.records]
-    return run_dense(work.keyframes, work.sparse, model, order, work.dense, options.dense)
+    stats = run_dense(work.keyframes, work.sparse, model, order, work.dense, options.dense)
+    return {**stats, 'off_path': dropped}
+
+
+def _odometry_pairs(
+    store: KeyframeStore, model: SparseModel
+) -> tuple[list[str], npt.NDArray[np.int64], F64, F64]:
+    """Return registered keyframes with odometry by stamp: names, stamps, centres, positions."""
+    rows = sorted(
+        (r.stamp_ns, r.file, r.odometry)
+        for r in store.records
+        if r.odometry is not None and r.file in model.views
+    )
+    names = [name for _, name, _ in rows]
+    stamps = np.array([stamp for stamp, _, _ in rows], dtype=np.int64)
+    centres = np.array([model.views[name].center for name in names]).reshape(-1, 3)
+    positions = np.array(
+        [odo.get('camera_position', odo['position']) for _, _, odo in rows], dtype=np.float64
+    ).reshape(-1, 3)
+    return names, stamps, centres, positions
+
+
+def _path_extent(positions: F64) -> float:
+    return float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
+
+
+def on_path(
+    work: WorkFolder, model: SparseModel, options: ReconOptions
+) -> tuple[SparseModel, list[str]]:
+    """Return the model without its keyframes that lie off the odometry path, and their names.
+
+    See :func:`.scale.off_path`; a keyframe within ``odometry_tolerance`` of the path's extent of
+    where odometry puts it is always kept. The dense and mesh stages both start from this model,
+    so a misregistered view neither adds a ghost surface nor bends the scale.
+    """
+    if not options.use_odometry:
+        return model, []
+    names, _, centres, positions = _odometry_pairs(KeyframeStore(work.keyframes), model)
+    if len(names) < 4:
+        return model, []
+    off = off_path(centres, positions, options.odometry_tolerance * _path_extent(positions))
+    dropped = [name for name, o in zip(names, off, strict=True) if o]
+    views = {n: v for n, v in model.views.items() if n not in dropped}
+    return (replace(model, views=views) if dropped else model), dropped
 
 
 def estimate_scale(
@@ -196,22 +244,13 @@ def estimate_scale(
         }
     odometry = None
     if options.use_odometry:
-        centres: dict[int, npt.NDArray[np.float64]] = {}
-        stamps, positions = [], []
-        for record in store.records:
-            odo = record.odometry
-            if odo is None or record.file not in model.views:
-                continue
-            centres[record.stamp_ns] = model.views[record.file].center
-            stamps.append(record.stamp_ns)
-            positions.append(odo.get('camera_position', odo['position']))
-        if centres:
-            order = np.argsort(stamps)
+        names, stamps, centres, positions = _odometry_pairs(store, model)
+        if names:
             odometry = scale_from_odometry(
-                centres, np.asarray(stamps, np.int64)[order], np.asarray(positions)[order]
+                dict(zip(stamps.tolist(), centres, strict=True)), stamps, positions
             )
             details['odometry'] = {
-                'keyframes': len(centres),
+                'keyframes': len(names),
                 'camera_offset_known': all(
                     r.odometry is not None and 'camera_position' in r.odometry
                     for r in store.records
@@ -219,8 +258,7 @@ def estimate_scale(
                 ),
                 'estimate': None if odometry is None else odometry.__dict__,
             }
-            path = np.asarray(positions)
-            extent = float(np.linalg.norm(path.max(axis=0) - path.min(axis=0)))
+            extent = _path_extent(positions)
             if odometry is not None and odometry.rms_residual > options.odometry_tolerance * extent:
                 # The SfM path does not have the odometry's shape: one of them is wrong
                 # (misregistered keyframes, say, on repeating texture); its scale would be too.
@@ -292,7 +330,7 @@ def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
     dense_path = work.dense / 'dense.ply'
     if not dense_path.exists():
         raise StockpileError(f'{dense_path}: missing; run the dense stage first')
-    model = load_sparse(work.sparse)
+    model, dropped = on_path(work, load_sparse(work.sparse), options)
     cloud = o3d.io.read_point_cloud(dense_path)
     points = np.asarray(cloud.points)
     scale, scale_details = estimate_scale(work, model, options)
@@ -347,6 +385,7 @@ def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
             'translation': [float(v) for v in sim.translation],
         },
         'keyframes': _keyframe_poses(model, work, sim.scale, sim.rotation, sim.translation),
+        'keyframes_off_path': dropped,
         'poisson': poisson,
     }
     (work.mesh / 'mesh.json').write_text(json.dumps(info, indent=1) + '\n')

@@ -26,6 +26,7 @@ __all__ = [
     'bootstrap_scale',
     'combine',
     'detect_charuco',
+    'off_path',
     'scale_from_odometry',
     'scale_from_target',
     'triangulate',
@@ -301,6 +302,38 @@ def scale_from_odometry(
     sim = umeyama(s, d)
     rms = float(np.sqrt(np.mean(np.sum((sim.apply(s) - d) ** 2, axis=1))))
     return ScaleEstimate('odometry', sim.scale, bootstrap_scale(s, d), len(s), rms)
+
+
+def off_path(src: F64, dst: F64, floor: float, min_points: int = 4) -> npt.NDArray[np.bool_]:
+    """Keyframes whose centre lies far off the path the others trace, once scaled onto odometry.
+
+    A keyframe that Structure-from-Motion registered on repeating texture (a gravel or ground
+    pattern seen twice) can sit metres from where the cart was while every other keyframe is
+    right; one such view bends a plain similarity fit of all of them. The fit is redone on the
+    keyframes whose residual is under three times their median (or under ``floor``) until the
+    set stops changing; a keyframe left out of the last fit is off the path.
+
+    Args:
+        src: Nx3 keyframe centres in model units.
+        dst: Nx3 odometry camera positions of the same keyframes [m].
+        floor: Residual [m] under which a keyframe is never off the path.
+        min_points: Fewest keyframes the fit keeps; with fewer nothing is left out.
+
+    Returns:
+        Per keyframe, whether it is off the path.
+
+    """
+    keep = np.ones(len(src), dtype=bool)
+    for _ in range(10):
+        sim = umeyama(src[keep], dst[keep])
+        res = np.linalg.norm(sim.apply(src) - dst, axis=1)
+        inside = res <= max(3.0 * float(np.median(res[keep])), floor)
+        if inside.sum() < max(min_points, (len(src) + 1) // 2):
+            return np.zeros(len(src), dtype=bool)
+        if np.array_equal(inside, keep):
+            break
+        keep = inside
+    return ~keep
 
 
 def combine(target: ScaleEstimate | None, odometry: ScaleEstimate | None) -> ScaleEstimate:

@@ -52,6 +52,21 @@ def json_safe(value: Any) -> Any:
     return value
 
 
+def _reconstruction_warnings(info: dict[str, Any]) -> list[str]:
+    """Return what ``mesh.json`` says went wrong upstream, in words for report.json."""
+    out = []
+    off = info.get('keyframes_off_path') or []
+    if off:
+        out.append(
+            f'{len(off)} keyframes were left out: Structure-from-Motion placed them far from '
+            f'where odometry puts the camera (repeating texture?): {", ".join(off)}.'
+        )
+    rejected = (info.get('scale_details') or {}).get('odometry', {}).get('rejected')
+    if rejected:
+        out.append(f'Odometry was not used for the scale: {rejected}.')
+    return out
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -111,7 +126,7 @@ def analyse_mesh(
                 'fer': 'a / c',
             },
         },
-        'warnings': visibility_warnings(rocks),
+        'warnings': _reconstruction_warnings(info) + visibility_warnings(rocks),
         'mesh': {'faces': len(f), 'vertices': len(v), 'source': source},
     }
     return Analysis(v, f, colors, seg, rocks, json_safe(report))
