@@ -39,6 +39,23 @@ def test_blurred_frame_is_rejected_and_sharp_one_kept() -> None:
     assert d.accepted and d.reason in ('parallax', 'coverage')
 
 
+def test_scene_turning_smooth_is_not_blur_but_a_burst_of_blur_is() -> None:
+    # The end of a pass: the rocks leave the view for smoother ground, and sharpness falls to 40 %
+    # over 20 frames. Then three frames smeared by a bump.
+    tex = _texture()
+    smooth = cv2.GaussianBlur(tex, (0, 0), 2.5)
+    sel = KeyframeSelector(SelectorOptions())
+    blurred = []
+    for i in range(60):
+        w = min(1.0, max(0.0, (i - 20) / 20))
+        img = cv2.addWeighted(_view(tex, 4 * i), 1 - w, _view(smooth, 4 * i), w, 0)
+        if i in (50, 51, 52):
+            img = cv2.GaussianBlur(img, (0, 0), 3)
+        if sel.push(img).reason == 'blurred':
+            blurred.append(i)
+    assert blurred == [50, 51, 52]
+
+
 def test_parallax_decides_between_frames() -> None:
     tex = _texture(1)
     opts = SelectorOptions(min_spacing=1, min_parallax=0.05, max_spacing=0, work_width=320)
