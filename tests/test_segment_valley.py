@@ -1,4 +1,5 @@
-"""The valley test (a crease at the scale of a centimetre) and the hand-back of valley faces."""
+"""The valley test (a crease at the scale of a centimetre), the hand-back of valley faces and the
+split of a region that a wider valley cuts in two."""
 
 from __future__ import annotations
 
@@ -10,7 +11,14 @@ import pytest
 from segment_fixtures import height_field
 
 from stockpile_ros.segment.adjacency import FaceAdjacency, face_geometry
-from stockpile_ros.segment.segmentation import SegmentParams, hand_back, segment_mesh, valley_faces
+from stockpile_ros.segment.segmentation import (
+    SegmentParams,
+    hand_back,
+    segment_mesh,
+    split_at_valleys,
+    valley_depths,
+    valley_faces,
+)
 
 F64 = npt.NDArray[np.float64]
 
@@ -64,3 +72,60 @@ def test_the_search_stops_at_a_rounded_crease() -> None:
     assert np.all(seg.geometry.centroids[seg.labels == 0, 2] < SegmentParams().ground_tolerance)
     # Without the valley test the face-to-face criterion alone breaks the same mesh into pieces.
     assert segment_mesh(v, f, replace(SegmentParams(), valley_depth=0.0)).raw_regions > 2
+
+
+def test_depths_at_several_scales_match_one_scale_at_a_time() -> None:
+    v, f = height_field(_domes, 0.1, 81)
+    geom = face_geometry(v, f)
+    both = valley_depths(v, f, geom, [0.015, 0.0075])
+    for radius, depth in zip([0.015, 0.0075], both, strict=True):
+        np.testing.assert_allclose(depth, valley_depths(v, f, geom, [radius])[0])
+
+
+def test_a_region_cut_by_a_valley_into_two_large_parts_is_split() -> None:
+    # A strip of 10 faces, one region; faces 4 and 5 are deep: parts of 4 faces on either side.
+    adj = FaceAdjacency(10, np.arange(9), np.arange(1, 10))
+    labels = np.ones(10, dtype=np.int32)
+    areas = np.ones(10)
+    deep = np.zeros(10, dtype=bool)
+    deep[[4, 5]] = True
+    split = split_at_valleys(labels, adj, areas, deep, min_share=0.3)
+    assert split[:5].tolist() == [split[0]] * 5
+    assert split[5:].tolist() == [split[9]] * 5
+    assert split[0] != split[9]
+    # Parts under the minimum share, or a deep band at one end, leave the region whole.
+    assert split_at_valleys(labels, adj, areas, deep, min_share=0.5).tolist() == [1] * 10
+    end = np.zeros(10, dtype=bool)
+    end[[8, 9]] = True
+    assert split_at_valleys(labels, adj, areas, end, min_share=0.1).tolist() == [1] * 10
+
+
+def test_split_faces_go_back_to_their_own_region_only() -> None:
+    # 1 1 [1 1 1] 2 2: the deep faces of region 1 sit next to region 2 but stay in region 1's parts.
+    adj = FaceAdjacency(12, np.arange(11), np.arange(1, 12))
+    labels = np.array([1] * 9 + [2] * 3, dtype=np.int32)
+    deep = np.zeros(12, dtype=bool)
+    deep[[3, 4, 8]] = True
+    split = split_at_valleys(labels, adj, np.ones(12), deep, min_share=0.2)
+    assert len(set(split[:9].tolist())) == 2
+    assert split[8] == split[7]
+    assert split[9:].tolist() == [2, 2, 2]
+
+
+def test_two_domes_in_one_region_are_split_at_the_crease_between_them() -> None:
+    v, f = height_field(_domes, 0.1, 161)
+    geom = face_geometry(v, f)
+    params = SegmentParams()
+    labels = np.where(geom.centroids[:, 2] > params.ground_tolerance, 1, 0).astype(np.int32)
+    deep = valley_depths(v, f, geom, [params.split_radius])[0] > params.split_depth
+    seg = segment_mesh(v, f)
+    split = split_at_valleys(labels, seg.adjacency, geom.areas, deep, params.split_min_share)
+    xy = geom.centroids[:, :2]
+    tops = [np.argmin(np.linalg.norm(xy - [x, 0.0], axis=1)) for x in (-0.045, 0.045)]
+    assert len(set(split[tops].tolist())) == 2
+    assert min(split[tops]) > 0
+    # Every face of the region went to one dome or the other.
+    assert np.all(split[labels > 0] > 0)
+    # One dome alone is not split.
+    one = np.where(xy[:, 0] < 0, labels, 0).astype(np.int32)
+    assert set(split_at_valleys(one, seg.adjacency, geom.areas, deep, 0.1).tolist()) <= {0, 1}

@@ -15,21 +15,25 @@ Two presets of :class:`SegmentParams`:
   and a looser test merges touching rocks); seeds from the most convex faces; every region under
   1 % of the searched faces is a fragment and is merged into the neighbouring region it shares
   the longest border with; the valley faces are handed back to the regions they border, growing
-  from both sides of a valley until they meet; last, neighbouring regions whose union stays
+  from both sides of a valley until they meet; then neighbouring regions whose union stays
   convex across their shared border are joined (on reconstructed piles, noise stops the search
   inside single rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on
-  another, see ``merge_convex_borders``).
+  another, see ``merge_convex_borders``); last, a region that a wider valley (at the scale of
+  1.5 cm) cuts into two or more large parts is split into them (two touching rocks that the
+  search joined through a gap in the centimetre valley, see ``split_at_valleys``).
 """
 
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 from scipy import sparse
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
@@ -45,6 +49,8 @@ __all__ = [
     'merge_convex_borders',
     'merge_fragments',
     'segment_mesh',
+    'split_at_valleys',
+    'valley_depths',
     'valley_faces',
 ]
 
@@ -94,6 +100,16 @@ class SegmentParams:
             D50 error from 9.8 % to 4.3 %; 0.3 mm and 0.7 mm did worse on b or D50.
         valley_radius: Scale of the smoothed surroundings: the standard deviation of the
             smoothing kernel [m]. 5 mm and 10 mm measured about as well as 7.5 mm.
+        split_depth: Faces deeper than this under their surroundings at the scale
+            ``split_radius`` cut a region; where they cut it into two or more parts of at least
+            ``split_min_share`` of its area each, the parts become regions of their own (see
+            ``split_at_valleys``); 0 disables [m] [0]. On twelve reconstructed piles 1 mm split
+            one region, two touching rocks joined through a gap in the centimetre valley (recall
+            0.905 -> 0.912, median b error 5.1 % -> 4.8 %, worst D50 error 16.4 % -> 6.9 %);
+            0.8 mm and 1.3 mm measured the same or better, 0.6 mm began to split single rocks.
+        split_radius: Scale of the surroundings for ``split_depth`` [m].
+        split_min_share: Smallest share of a region's area that a part needs to be split off
+            (0.2 measured as 0.1).
 
     """
 
@@ -112,6 +128,9 @@ class SegmentParams:
     border_min_edges: int = 5
     valley_depth: float = 0.0005
     valley_radius: float = 0.0075
+    split_depth: float = 0.001
+    split_radius: float = 0.015
+    split_min_share: float = 0.1
 
     @classmethod
     def paper(cls) -> SegmentParams:
@@ -127,6 +146,7 @@ class SegmentParams:
             merge_fragments=False,
             merge_convex=False,
             valley_depth=0.0,
+            split_depth=0.0,
         )
 
     @classmethod
@@ -178,27 +198,27 @@ def _smooth_normals(geom: FaceGeometry, adj: FaceAdjacency, rounds: int) -> npt.
     return normals
 
 
-def valley_faces(
-    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radius: float, depth: float
-) -> npt.NDArray[np.bool_]:
-    """Faces lying in a concave valley deeper than ``depth`` at the scale ``radius``.
+def valley_depths(
+    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radii: Sequence[float]
+) -> list[F64]:
+    """Depth of each face under its smoothed surroundings, at each scale in ``radii``.
 
     Each vertex is compared with the average of its neighbourhood, found by rounds of uniform
     Laplacian smoothing: ``k`` rounds over edges of median length ``e`` spread a vertex with a
-    standard deviation of about ``e sqrt(k / 2)``, so ``k = 2 (radius / e)^2``. A vertex whose
-    smoothed position lies above it along its normal sits in a valley; a face is a valley face
-    when the mean of its vertices' depths exceeds ``depth``. Unlike Eq. 2, which compares
-    neighbouring faces only, this sees a crease that Poisson spread over several faces.
+    standard deviation of about ``e sqrt(k / 2)``, so ``k = 2 (radius / e)^2``. The depth of a
+    vertex is how far its smoothed position lies above it along its normal (positive in a valley,
+    negative on a crest); a face's is the mean of its vertices'. Unlike Eq. 2, which compares
+    neighbouring faces only, this sees a crease that Poisson spread over several faces. The
+    smoothing runs once, up to the largest radius, and is read off at each smaller one on the way.
 
     Args:
         vertices: Nx3 vertex positions [m].
         faces: Mx3 triangles.
         geom: Face normals and areas (the vertex normals are their area-weighted means).
-        radius: Scale of the neighbourhood [m].
-        depth: Depth over which a face is in a valley [m].
+        radii: Scales of the neighbourhood [m].
 
     Returns:
-        Per face, whether it lies in a valley.
+        Per face depths [m], one array per radius, in the order of ``radii``.
 
     """
     n = len(vertices)
@@ -210,19 +230,32 @@ def valley_faces(
     ).astype(np.float64)
     vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
     b = faces[:, [1, 2, 0]].ravel()
-    edge_len = np.linalg.norm(vertices[a] - vertices[b], axis=1)
-    rounds = max(1, round(2.0 * (radius / max(float(np.median(edge_len)), 1e-12)) ** 2))
+    edge = max(float(np.median(np.linalg.norm(vertices[a] - vertices[b], axis=1))), 1e-12)
     # An interior edge comes once from each of its faces: the matrix only marks neighbours.
     link = sparse.csr_matrix(
         (np.ones(2 * len(a)), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n, n)
     )
     link.data[:] = 1.0
     step = sparse.diags(1.0 / np.maximum(np.asarray(link.sum(axis=1)).ravel(), 1.0)) @ link
-    smooth = vertices
-    for _ in range(rounds):
-        smooth = step @ smooth
-    deep = np.einsum('ij,ij->i', smooth - vertices, vn)
-    return np.asarray(deep[faces].mean(axis=1) > depth)
+    smooth, done = vertices, 0
+    out: dict[int, F64] = {}
+    for k in sorted(range(len(radii)), key=lambda k: radii[k]):
+        for _ in range(max(1, round(2.0 * (radii[k] / edge) ** 2)) - done):
+            smooth = step @ smooth
+            done += 1
+        deep = np.einsum('ij,ij->i', smooth - vertices, vn)
+        out[k] = np.asarray(deep[faces].mean(axis=1))
+    return [out[k] for k in range(len(radii))]
+
+
+def valley_faces(
+    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radius: float, depth: float
+) -> npt.NDArray[np.bool_]:
+    """Faces lying in a concave valley deeper than ``depth`` at the scale ``radius``.
+
+    See ``valley_depths``; ``radius`` [m], ``depth`` [m].
+    """
+    return valley_depths(vertices, faces, geom, [radius])[0] > depth
 
 
 def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
@@ -388,6 +421,53 @@ def merge_convex_borders(
         cache = {k: d for k, d in cache.items() if keep not in k and gone not in k}
 
 
+def split_at_valleys(
+    labels: I32,
+    adj: FaceAdjacency,
+    areas: F64,
+    deep: npt.NDArray[np.bool_],
+    min_share: float,
+) -> I32:
+    """Split each region that its ``deep`` faces cut into two or more large parts.
+
+    Within a region, the faces that are not deep fall into connected parts. Where two or more of
+    them each hold at least ``min_share`` of the region's area, each becomes a region of its own
+    and the rest of the region (the valley and any small parts) is handed back to them, within
+    the region only (see ``hand_back``). Other regions are left alone.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        areas: Face areas.
+        deep: Per face, whether it lies in a valley.
+        min_share: Smallest share of its region's area for a part to count.
+
+    Returns:
+        The labels, split regions under new ids.
+
+    """
+    m = len(labels)
+    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
+    keep = same & ~deep[adj.i] & ~deep[adj.j]
+    graph = sparse.csr_matrix((np.ones(int(keep.sum())), (adj.i[keep], adj.j[keep])), shape=(m, m))
+    _, part = connected_components(graph, directed=False)
+    solid = (labels > 0) & ~deep
+    part_area = np.bincount(part[solid], weights=areas[solid], minlength=m)
+    region_area = np.bincount(labels, weights=areas)
+    big = solid & (part_area[part] >= min_share * region_area[labels])
+    regions = np.unique(np.stack([labels[big], part[big]], axis=1), axis=0)[:, 0]
+    split = np.bincount(regions, minlength=len(region_area)) >= 2
+    split[0] = False
+    if not split.any():
+        return labels
+    in_split = split[labels]
+    out = np.where(in_split, 0, labels).astype(np.int32)
+    sel = in_split & big
+    _, new = np.unique(part[sel], return_inverse=True)
+    out[sel] = int(labels.max()) + 1 + new.ravel()
+    return hand_back(out, FaceAdjacency(m, adj.i[same], adj.j[same]), in_split)
+
+
 def _renumber_by_size(labels: I32) -> I32:
     sizes = np.bincount(labels)
     sizes[0] = 0
@@ -423,9 +503,13 @@ def segment_mesh(
     if p.exclude_ground:
         ground = (geom.centroids[:, 2] < p.ground_tolerance) & (normals[:, 2] >= p.ground_min_nz)
         active &= ~ground
+    # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's.
+    scales = ((p.valley_radius, p.valley_depth), (p.split_radius, p.split_depth))
+    radii = [r for r, d in scales if d > 0]
+    depths = valley_depths(v, f, geom, radii) if radii else []
     valley = np.zeros(m, dtype=bool)
     if p.valley_depth > 0:
-        valley = valley_faces(v, f, geom, p.valley_radius, p.valley_depth) & active
+        valley = (depths[0] > p.valley_depth) & active
         active &= ~valley
     if active.all():
         search = adj
@@ -463,5 +547,9 @@ def segment_mesh(
     if p.merge_convex:
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
+        )
+    if p.split_depth > 0:
+        labels = split_at_valleys(
+            labels, adj, geom.areas, depths[-1] > p.split_depth, p.split_min_share
         )
     return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p)
