@@ -34,7 +34,7 @@ from stockpile_ros.segment.scoring import rock_recall_precision  # noqa: E402
 from stockpile_ros.segment.segmentation import (  # noqa: E402
     SegmentParams,
     segment_mesh,
-    valley_faces,
+    valley_depths,
 )
 from stockpile_ros.segment.synthetic import (  # noqa: E402
     make_pile,
@@ -73,9 +73,11 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
           f'(geometry {t_geom:.2f}, adjacency {t_adj:.2f}, Eq. 2 on all edges {t_score:.2f}, '
           f'search {t_grow:.2f}); {fast.max()} regions')  # fmt: skip
     t_default = best_of(lambda: segment_mesh(v, f, SegmentParams()), repeat)
-    t_valley = best_of(lambda: valley_faces(v, f, g, 0.0075, 0.0005), repeat)
+    d = SegmentParams()
+    t_valley = best_of(lambda: valley_depths(v, f, g, [d.valley_radius, d.split_radius]), repeat)
     print(f'default mode, one core, best of {repeat}: total {t_default:.2f} s '
-          f'(valley test {t_valley:.2f})')  # fmt: skip
+          f'(valley depths at {d.valley_radius * 1000:g} and {d.split_radius * 1000:g} mm: '
+          f'{t_valley:.2f})')  # fmt: skip
     if reference:
         t0 = time.perf_counter()
         slow = reference_bfs(g.centroids, g.normals, adj, t, seeds)
