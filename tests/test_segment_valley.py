@@ -17,7 +17,6 @@ from stockpile_ros.segment.segmentation import (
     segment_mesh,
     split_at_valleys,
     valley_depths,
-    valley_faces,
 )
 
 F64 = npt.NDArray[np.float64]
@@ -32,7 +31,7 @@ def _domes(x: F64, y: F64) -> F64:
 
 def _valley_area_near(v: F64, f: npt.NDArray[np.int64], x0: float) -> tuple[float, float]:
     geom = face_geometry(v, f)
-    valley = valley_faces(v, f, geom, radius=0.0075, depth=0.0005)
+    valley = valley_depths(v, f, geom, [0.0075])[0] > 0.0005
     near = np.abs(geom.centroids[:, 0] - x0) < 0.01
     return float(geom.areas[valley & near].sum()), float(geom.areas[valley & ~near].sum())
 

@@ -8,7 +8,7 @@ Two presets of :class:`SegmentParams`:
   within 1 cm of the ground plane that does not face down is ground and is excluded first (Poisson
   rounds the foot of each rock into a skirt that the search would otherwise take into the rock:
   10-27 % of a rock's area on one pile); faces in a concave valley at the scale of a centimetre
-  are kept out of the search too (see ``valley_faces``: where two rocks touch, Poisson bridges the
+  are kept out of the search too (see ``valley_depths``: where two rocks touch, Poisson bridges the
   crevice with a surface that is smooth face to face, and the search leaked through it: on seven
   piles, 21 of its regions had under 85 % of their area on a single rock); ``t = 0.93``
   (stricter than the paper's 0.7 and the authors' code's 0.81: Poisson rounds contact creases,
@@ -51,7 +51,6 @@ __all__ = [
     'segment_mesh',
     'split_at_valleys',
     'valley_depths',
-    'valley_faces',
 ]
 
 Mode = Literal['paper', 'default']
@@ -246,16 +245,6 @@ def valley_depths(
         deep = np.einsum('ij,ij->i', smooth - vertices, vn)
         out[k] = np.asarray(deep[faces].mean(axis=1))
     return [out[k] for k in range(len(radii))]
-
-
-def valley_faces(
-    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radius: float, depth: float
-) -> npt.NDArray[np.bool_]:
-    """Faces lying in a concave valley deeper than ``depth`` at the scale ``radius``.
-
-    See ``valley_depths``; ``radius`` [m], ``depth`` [m].
-    """
-    return valley_depths(vertices, faces, geom, [radius])[0] > depth
 
 
 def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
