@@ -108,7 +108,7 @@ class SegmentParams:
             0.8 mm and 1.3 mm measured the same or better, 0.6 mm began to split single rocks.
         split_radius: Scale of the surroundings for ``split_depth`` [m].
         split_min_share: Smallest share of a region's area that a part needs to be split off
-            (0.2 measured as 0.1).
+            (0.2 measured the same as 0.1).
 
     """
 
