@@ -44,6 +44,9 @@ class MessageFactory(Protocol):
     def f64(self, data: npt.ArrayLike) -> Any:
         """Convert numbers to the library's ``float64[]`` value."""
 
+    def u32(self, data: npt.ArrayLike) -> Any:
+        """Convert non-negative integers to the library's ``uint32[]`` value."""
+
 
 class RosbagsFactory:
     """Message factory over a rosbags typestore (numpy arrays for primitive arrays)."""
@@ -64,6 +67,10 @@ class RosbagsFactory:
     def f64(self, data: npt.ArrayLike) -> Any:
         """Return a float64 numpy array."""
         return np.asarray(data, dtype=np.float64).reshape(-1)
+
+    def u32(self, data: npt.ArrayLike) -> Any:
+        """Return a uint32 numpy array."""
+        return np.asarray(data, dtype=np.uint32).reshape(-1)
 
 
 def stamp(f: MessageFactory, stamp_ns: int) -> Any:

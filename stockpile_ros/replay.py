@@ -1,10 +1,13 @@
-"""Replay a recorded bag through the components of the node set, as the nodes would run on it.
+"""Replay a recorded bag through the components of the node set: a bag driver, nothing more.
 
-Frames go, in bag order, through the keyframe collector (odometry interpolated at each frame);
-the pipeline runs at every recorded trigger (``std_msgs/Empty`` on the trigger topic), or once at
-the end of the bag when it has none. Everything the nodes would publish is written into an MCAP
-bag, next to the camera images, camera info and transforms of the input (original stamps) so that
-Foxglove shows the camera too; results carry the stamp of their trigger.
+The bag's camera, camera info, odometry and transforms go, in bag order, into the same
+:class:`~stockpile_ros.components.KeyframeComponent` the keyframe node runs; what each component
+publishes is written into an MCAP bag and handed, as the very same message, to the components
+that subscribe to it in the topic table (keyframes to the reconstruction, the surface to the
+segmentation), as DDS would between the nodes. The reconstruction runs at every recorded trigger
+(``std_msgs/Empty`` on the trigger topic), on its own after ``auto_trigger_keyframes``, or once at
+the end of a bag that has no trigger. The input topics are written too (original stamps) so that
+Foxglove shows the camera; results carry the stamp of their trigger.
 """
 
 from __future__ import annotations
@@ -15,33 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from . import topics
-from .bagio.images import ImageError, decode_image
-from .bagio.reader import (
-    BagReader,
-    CameraInfoError,
-    ReadStats,
-    camera_info_topic_for,
-    camera_model_from_msg,
-    message_stamp_ns,
-)
+from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
 from .bagio.writer import BagWriter
-from .camera import CameraModel, Frame
+from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
 from .errors import StockpileError
 from .progress import progress
-from .publish import (
-    Publication,
-    capture_warnings,
-    diagnostics,
-    keyframe_status,
-    reconstruction_diagnostics,
-    reconstruction_outputs,
-    segmentation_outputs,
-    status,
-)
-from .recon.collector import KeyframeCollector
-from .recon.pipeline import WorkFolder
-from .recon.sources import OdometryTrack
-from .runner import Outcome, run_reconstruction, run_segmentation
+from .publish import DIAGNOSTIC_PREFIX, Publication
+from .runner import Outcome
 from .settings import Settings
 
 __all__ = ['ReplaySummary', 'replay']
@@ -98,97 +81,72 @@ class ReplaySummary:
         return self.report is not None
 
 
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith('/') else '/' + topic
+def _problems(msg: Any) -> list[str]:
+    """Return the WARN and ERROR lines of a ``DiagnosticArray``, as the summary prints them."""
+    out = []
+    for st in msg.status:
+        if int(st.level):
+            values = {kv.key: kv.value for kv in st.values}
+            advice = f'. {values["advice"]}' if values.get('advice') else ''
+            out.append(f'{st.name.removeprefix(DIAGNOSTIC_PREFIX + "/")}: {st.message}{advice}')
+    return out
 
 
-class _Replay:
-    """State of one replay: collector, writer, summary."""
+class _Rig:
+    """The three components wired as the topic table says, publishing into the output bag."""
 
     def __init__(self, settings: Settings, writer: BagWriter, summary: ReplaySummary) -> None:
         self.settings = settings
         self.writer = writer
-        self.f = writer.factory
         self.summary = summary
-        self.collector = KeyframeCollector(
-            WorkFolder(settings.work_dir).keyframes,
-            settings.recon.selector,
-            float(settings.values['coverage_full_parallax']),
-        )
-        self.max_faces = int(settings.values['display_max_faces'])
+        f = writer.factory
+        self.keyframes = KeyframeComponent(settings, f)
+        self.reconstruction = ReconstructionComponent(settings, f)
+        self.segmentation = SegmentationComponent(settings, f)
 
-    def emit(self, stamp_ns: int, publications: list[Publication]) -> None:
-        for topic, msg in publications:
-            self.writer.write(_absolute(topic), msg, stamp_ns)
+    def publish(self, stamp_ns: int, publications: list[Publication]) -> None:
+        """Write each publication and deliver it to its subscribers, in order."""
+        for name, msg in publications:
+            self.writer.write(topics.absolute(name), msg, stamp_ns)
+            if name == topics.DIAGNOSTICS:
+                self.summary.problems.extend(_problems(msg))
+            elif name == topics.KEYFRAMES:
+                self.publish(stamp_ns, self.reconstruction.on_keyframe(msg, stamp_ns))
+            elif name == topics.KEYFRAME_STATUS:
+                if self.reconstruction.on_keyframe_status(msg):
+                    self.reconstruct(stamp_ns)
+            elif name == topics.SURFACE:
+                self.segment(stamp_ns, msg)
 
-    def problem(self, stamp_ns: int, name: str, level: str, text: str, **values: Any) -> None:
-        self.summary.problems.append(text)
-        self.emit(stamp_ns, [diagnostics(self.f, stamp_ns, name, level, text, values)])
-
-    def run_pipeline(self, stamp_ns: int) -> None:
-        """Reconstruct and segment what the collector holds; results stamped ``stamp_ns``."""
-        f, state, s = self.f, self.collector.state, self.summary
+    def reconstruct(self, stamp_ns: int) -> None:
+        """Run the reconstruction (a trigger); the surface it publishes is segmented in turn."""
+        s = self.summary
         s.triggers += 1
-        s.keyframes, s.coverage = state.keyframes, state.coverage
-
-        def on_stage(stage: str, index: int, seconds: float | None) -> None:
-            if seconds is None:
-                self.emit(stamp_ns, [status(f, stamp_ns, 'RECONSTRUCTING', stage, state,
-                                            f'running {stage}', progress=index / 3)])  # fmt: skip
-
-        recon = run_reconstruction(self.settings, on_stage)
-        self.emit(stamp_ns, reconstruction_diagnostics(f, stamp_ns, recon))
-        s.recon = s.outcome = recon
-        if not recon.ok:
-            s.problems.append(f'{recon.stage}: {recon.reason}. {recon.advice}')
-            self.emit(stamp_ns, [status(f, stamp_ns, 'FAILED', recon.stage, state,
-                                        recon.reason, recon.advice)])  # fmt: skip
-            return
-        work = self.settings.work_dir
-        self.emit(stamp_ns, reconstruction_outputs(f, stamp_ns, work, self.settings.frame_id,
-                                                   self.max_faces))  # fmt: skip
-        ready = f.cls('std_msgs/msg/String')(data=str(work))
-        self.emit(stamp_ns, [(topics.MESH_READY, ready)])
-        self.emit(stamp_ns, [status(f, stamp_ns, 'SEGMENTING', 'segment', state, 'segmenting')])
-        seg = run_segmentation(self.settings, s.result_dir)
-        s.outcome = seg
-        if not seg.ok or seg.analysis is None:
-            s.problems.append(f'{seg.stage}: {seg.reason}. {seg.advice}')
-            self.emit(stamp_ns, [
-                diagnostics(f, stamp_ns, 'segment', 'ERROR', seg.reason, {'advice': seg.advice}),
-                status(f, stamp_ns, 'FAILED', 'segment', state, seg.reason, seg.advice),
-            ])  # fmt: skip
-            return
-        report = seg.analysis.report
-        s.report = report
-        s.problems.extend(report['warnings'])
-        self.emit(stamp_ns, capture_warnings(f, stamp_ns, report))
-        self.emit(
-            stamp_ns,
-            segmentation_outputs(f, stamp_ns, seg.analysis, self.settings.frame_id, self.max_faces),
+        held = self.reconstruction.held
+        s.keyframes, s.coverage = held.keyframes, held.coverage
+        s.recon = s.outcome = self.reconstruction.run(
+            self.settings, stamp_ns, lambda pubs: self.publish(stamp_ns, pubs)
         )
-        self.emit(stamp_ns, [
-            diagnostics(f, stamp_ns, 'segment', 'OK', f'{len(report["rocks"])} rocks',
-                        {'rocks': len(report['rocks']), 'seconds': round(seg.seconds['segment'], 2),
-                         'd50': report['gradation'].get('d50')}),
-            status(f, stamp_ns, 'DONE', 'segment', state, _verdict(report)),
-        ])  # fmt: skip
 
-
-def _verdict(report: dict[str, Any]) -> str:
-    g = report['gradation']
-    d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} m'
-    text = f'{len(report["rocks"])} rocks, D50 {d50}'
-    spec = g.get('spec') or {}
-    if spec.get('checked'):
-        text += f'; class {spec.get("class")}: ' + ('PASS' if spec.get('passed') else 'FAIL')
-    return text
+    def segment(self, stamp_ns: int, surface: Any) -> None:
+        failed = self.segmentation.on_surface(surface, stamp_ns)
+        if failed:
+            self.publish(stamp_ns, failed)
+            return
+        seg = self.segmentation.run(
+            self.settings,
+            stamp_ns,
+            lambda pubs: self.publish(stamp_ns, pubs),
+            self.summary.result_dir,
+        )
+        self.summary.outcome = seg
+        self.summary.report = seg.analysis.report if seg.ok and seg.analysis else None
 
 
 def replay(
     bag: str | Path, out: str | Path, settings: Settings, topic: str | None = None
 ) -> ReplaySummary:
-    """Replay ``bag`` into ``out``: ``work/``, ``result/`` and the ``replay.mcap`` bag folder.
+    """Replay ``bag`` into ``out``: ``work/``, ``result/`` and the ``replay.mcap`` bag.
 
     Args:
         bag: Input bag (folder, ``.mcap`` or ``.db3``).
@@ -225,92 +183,55 @@ def replay(
             )
         summary.image_topic = image_topic
         info_topic = camera_info_topic_for(image_topic, [t for t, _ in reader.topics_of([_INFO])])
-        passthrough = [t for t, _ in reader.topics_of([_TF, _ODOMETRY])]
-        trigger_topics = [
+        odometry = [t for t, _ in reader.topics_of([_ODOMETRY])]
+        tf = [t for t, _ in reader.topics_of([_TF]) if t in (topics.TF, topics.TF_STATIC)]
+        triggers = [
             t for t, _ in reader.topics_of([_EMPTY]) if t.rstrip('/').endswith(topics.TRIGGER)
         ]
-        passthrough += [info_topic] if info_topic else []
-        wanted = [image_topic, *passthrough, *trigger_topics]
+        routes = {image_topic: 'image', **{t: t for t in tf}, **{t: 'trigger' for t in triggers}}
+        routes.update({t: 'odometry' for t in odometry[:1]})
+        if info_topic:
+            routes[info_topic] = 'info'
         counts = reader.reader.topics
-        total = sum(counts[t].msgcount for t in wanted if t in counts) or None
+        total = sum(counts[t].msgcount for t in routes if t in counts) or None
         with BagWriter(output_bag) as writer:
-            state = _Replay(settings, writer, summary)
-            _stream(reader, state, stats, (image_topic, info_topic), wanted, trigger_topics, total)
-    summary.skipped += stats.total_skipped
+            rig = _Rig(settings, writer, summary)
+            _stream(reader, rig, stats, routes, total)
+    kf = rig.keyframes
+    summary.frames = kf.collector.state.frames
+    summary.skipped = sum(kf.counts.skipped.values()) + stats.total_skipped
+    summary.camera_info = kf.counts.camera_info > 0
     summary.problems.extend(stats.problems)
     return summary
 
 
 def _stream(
-    reader: BagReader,
-    state: _Replay,
-    stats: ReadStats,
-    camera_topics: tuple[str, str | None],
-    wanted: list[str],
-    trigger_topics: list[str],
-    total: int | None,
+    reader: BagReader, rig: _Rig, stats: ReadStats, routes: dict[str, str], total: int | None
 ) -> None:
-    """Pass the ``wanted`` topics through, in order, running the pipeline at each trigger."""
-    image_topic, info_topic = camera_topics
-    summary, f, settings = state.summary, state.f, state.settings
-    camera: CameraModel | None = None
-    odometry: OdometryTrack | None = None
-    odometry_read = False
+    """Feed the routed topics to the keyframe component in bag order; reconstruct at triggers."""
+    kf = rig.keyframes
     last_ns = 0
-    bad_info_noted = False
-    bad_encodings: dict[str, int] = {}
-    if info_topic is None:
-        state.problem(
-            0,
-            'camera_info',
-            'WARN',
-            f'no CameraInfo for {image_topic}: the intrinsics are self-calibrated by SfM',
-        )
-    messages = reader.messages(wanted, stats=stats)
-    for topic, _, log_ns, msg in progress(messages, 'replay', total=total, unit='msg'):
+    for name, _, log_ns, msg in progress(
+        reader.messages(list(routes), stats=stats), 'replay', total=total, unit='msg'
+    ):
         last_ns = log_ns
-        if topic in trigger_topics:
-            state.run_pipeline(log_ns)
+        route = routes[name]
+        if route == 'trigger':
+            rig.reconstruct(log_ns)
             continue
         try:
-            state.writer.write(topic, msg, log_ns)
+            rig.writer.write(name, msg, log_ns)
         except (KeyError, ValueError, TypeError) as exc:
-            stats.problems.append(f'{topic}: not passed through ({exc})')
-        if topic == info_topic:
-            try:
-                camera = camera_model_from_msg(msg)
-                summary.camera_info = True
-            except CameraInfoError as exc:
-                camera = None
-                if not bad_info_noted:
-                    state.problem(log_ns, 'camera_info', 'WARN',
-                                  f'{topic}: {exc}; such frames are self-calibrated')  # fmt: skip
-                    bad_info_noted = True
-            continue
-        if topic != image_topic:
-            continue
-        try:
-            image = decode_image(msg)
-        except ImageError as exc:
-            summary.skipped += 1
-            key = str(exc)
-            if key not in bad_encodings:
-                state.problem(log_ns, 'camera', 'ERROR', f'{topic}: frame skipped: {exc}')
-            bad_encodings[key] = bad_encodings.get(key, 0) + 1
-            continue
-        frame_id = str(msg.header.frame_id)
-        stamp_ns = message_stamp_ns(msg, log_ns)
-        usable = camera if camera is not None and camera.fits(image) else None
-        frame = Frame(stamp_ns, image, frame_id, usable, topic, summary.frames)
-        summary.frames += 1
-        if settings.recon.use_odometry and not odometry_read:
-            odometry = OdometryTrack.from_bag(reader.path, usable.frame_id if usable else frame_id)
-            odometry_read = True
-        pose = None if odometry is None else odometry.at(stamp_ns)
-        state.collector.push(frame, pose)
-        state.emit(log_ns, [keyframe_status(f, log_ns, state.collector.state)])
-    if bad_encodings:
-        counts = '; '.join(f'{n} x {why}' for why, n in bad_encodings.items())
-        state.problem(last_ns, 'camera', 'ERROR', f'{summary.skipped} frames skipped: {counts}')
-    if not trigger_topics or summary.triggers == 0:
-        state.run_pipeline(last_ns)
+            stats.problems.append(f'{name}: not passed through ({exc})')
+        if route == 'image':
+            rig.publish(log_ns, kf.on_image(msg, log_ns))
+        elif route == 'info':
+            rig.publish(log_ns, kf.on_camera_info(msg, log_ns))
+        elif route == 'odometry':
+            rig.publish(log_ns, kf.on_odometry(msg, log_ns))
+        else:
+            rig.publish(log_ns, kf.on_tf(msg, route == topics.TF_STATIC, log_ns))
+    # The end of the recording: nothing more will complete the keyframes still waiting.
+    rig.publish(last_ns, kf.flush(last_ns))
+    if rig.summary.triggers == 0:
+        rig.reconstruct(last_ns)

@@ -112,11 +112,14 @@ def run_reconstruction(
     return outcome
 
 
-def run_segmentation(settings: Settings, result_dir: str | Path | None = None) -> Outcome:
-    """Segment the work folder's mesh, measure the rocks and write the result folder.
+def run_segmentation(
+    settings: Settings, mesh_dir: Path, result_dir: str | Path | None = None
+) -> Outcome:
+    """Segment a mesh folder's surface, measure the rocks and write the result folder.
 
     Args:
         settings: Parameters, class to check and work folder.
+        mesh_dir: Folder holding ``mesh.ply`` and ``mesh.json``.
         result_dir: Result folder (``<work_dir>/result`` by default).
 
     Returns:
@@ -124,7 +127,6 @@ def run_segmentation(settings: Settings, result_dir: str | Path | None = None) -
 
     """
     outcome = Outcome(ok=True, stage='segment')
-    mesh_dir = WorkFolder(settings.work_dir).mesh
     out = Path(result_dir) if result_dir is not None else settings.work_dir / 'result'
     start = time.perf_counter()
     try:

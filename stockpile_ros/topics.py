@@ -1,10 +1,14 @@
-"""Names of what the node set subscribes to and publishes (REP 144), shared by nodes and replay.
+"""The one table of what the node set subscribes to and publishes: name, type, QoS, owner (REP 144).
 
-Relative names, so that a launch namespace or remapping moves them all. The replay writes the same
-names, absolute, into its output bag.
+The nodes create their subscriptions and publishers from it, the replay writes the same topics
+(absolute) into its output bag with the same offered QoS, and the tests check both against it.
+Names are relative, so that a launch namespace or remapping moves them all.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
 
 __all__ = [
     'CAMERA_INFO',
@@ -13,40 +17,153 @@ __all__ = [
     'DIAGNOSTICS',
     'GRADATION',
     'IMAGE',
+    'KEYFRAMES',
     'KEYFRAME_STATUS',
     'MESH',
-    'MESH_READY',
     'ODOMETRY',
+    'QOS_DEPTH',
     'RECONSTRUCT_SERVICE',
     'ROCKS',
     'ROCK_MARKERS',
     'SEGMENTED_CLOUD',
     'STATUS',
+    'SURFACE',
+    'TABLE',
+    'TF',
     'TF_STATIC',
     'TRIGGER',
+    'Qos',
+    'Topic',
+    'absolute',
+    'published_by',
+    'subscribed_by',
+    'topic',
 ]
+
+Qos = Literal['sensor', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
+"""QoS classes (the nodes map each onto an rclpy profile, the replay onto the offered QoS):
+
+- ``sensor``: best effort, keep last 5 (camera, camera info, odometry: a late sample is useless);
+- ``reliable``: reliable, volatile, keep last 10 (triggers);
+- ``stream``: reliable, volatile, keep all (keyframes: every one must arrive, none is replayed to
+  a late subscriber, which would hold every image in memory);
+- ``latched``: reliable, transient local, keep last 1 (results: a dashboard that joins late gets
+  the last one);
+- ``tf`` and ``tf_static``: what tf2's own listener and broadcasters use (keep last 100, the static
+  one transient local).
+"""
+
+QOS_DEPTH: dict[Qos, int] = {
+    'sensor': 5,
+    'reliable': 10,
+    'stream': 0,
+    'latched': 1,
+    'tf': 100,
+    'tf_static': 100,
+}
+"""History depth of each class (0: keep all)."""
+
+Component = Literal['keyframes', 'reconstruction', 'segmentation']
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the node set.
+
+    Attributes:
+        name: Relative name (``/``-prefixed where a standard tool listens at the root).
+        msgtype: ``pkg/msg/Name``.
+        qos: QoS class, see :data:`Qos`.
+        publishers: Components that publish it (empty: an input of the node set).
+        subscribers: Components that subscribe to it.
+
+    """
+
+    name: str
+    msgtype: str
+    qos: Qos
+    publishers: tuple[Component, ...] = ()
+    subscribers: tuple[Component, ...] = ()
+
 
 # Inputs.
 IMAGE = 'camera/image_raw'
 COMPRESSED_SUFFIX = '/compressed'
 CAMERA_INFO = 'camera/camera_info'
 ODOMETRY = 'odom'
-# With /tf_static: where the camera sits on the cart (its offset from the odometry's base frame).
-TF = '/tf'  # tf2_msgs/TFMessage
-TRIGGER = 'stockpile/trigger'  # std_msgs/Empty: reconstruct now (recorded triggers replay)
+TF = '/tf'
+TF_STATIC = '/tf_static'
+TRIGGER = 'stockpile/trigger'
 RECONSTRUCT_SERVICE = 'stockpile/reconstruct'  # std_srvs/Trigger
-
+# Between the components (and so between the cart and a base station).
+KEYFRAMES = 'stockpile/keyframes'
+KEYFRAME_STATUS = 'stockpile/keyframes/status'
+SURFACE = 'stockpile/surface'
 # Outputs.
-KEYFRAME_STATUS = 'stockpile/keyframes/status'  # stockpile_msgs/PipelineStatus
-# Absolute: the diagnostic aggregator listens there.
-DIAGNOSTICS = '/diagnostics'  # diagnostic_msgs/DiagnosticArray
-DENSE_CLOUD = 'stockpile/dense_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb)
-MESH = 'stockpile/mesh'  # visualization_msgs/MarkerArray (the Poisson surface as a triangle list)
-# Latched: where the stockpile frame lies in the odometry frame.
-TF_STATIC = '/tf_static'  # tf2_msgs/TFMessage
-MESH_READY = 'stockpile/mesh_ready'  # std_msgs/String: the work folder whose mesh/ is ready
-SEGMENTED_CLOUD = 'stockpile/segmented_cloud'  # sensor_msgs/PointCloud2 (x, y, z, rgb, label)
-ROCK_MARKERS = 'stockpile/rock_markers'  # visualization_msgs/MarkerArray
-ROCKS = 'stockpile/rocks'  # stockpile_msgs/RockArray
-GRADATION = 'stockpile/gradation'  # stockpile_msgs/Gradation
-STATUS = 'stockpile/status'  # stockpile_msgs/PipelineStatus
+DIAGNOSTICS = '/diagnostics'
+DENSE_CLOUD = 'stockpile/dense_cloud'
+MESH = 'stockpile/mesh'
+SEGMENTED_CLOUD = 'stockpile/segmented_cloud'
+ROCK_MARKERS = 'stockpile/rock_markers'
+ROCKS = 'stockpile/rocks'
+GRADATION = 'stockpile/gradation'
+STATUS = 'stockpile/status'
+
+_KF: Component = 'keyframes'
+_RC: Component = 'reconstruction'
+_SG: Component = 'segmentation'
+
+TABLE: tuple[Topic, ...] = (
+    Topic(IMAGE, 'sensor_msgs/msg/Image', 'sensor', (), (_KF,)),
+    Topic(IMAGE + COMPRESSED_SUFFIX, 'sensor_msgs/msg/CompressedImage', 'sensor', (), (_KF,)),
+    Topic(CAMERA_INFO, 'sensor_msgs/msg/CameraInfo', 'sensor', (), (_KF,)),
+    Topic(ODOMETRY, 'nav_msgs/msg/Odometry', 'sensor', (), (_KF,)),
+    # Where the camera sits on the cart (its offset from the odometry's base frame); the
+    # reconstruction also places the stockpile frame in the odometry frame on /tf_static.
+    Topic(TF, 'tf2_msgs/msg/TFMessage', 'tf', (), (_KF,)),
+    Topic(TF_STATIC, 'tf2_msgs/msg/TFMessage', 'tf_static', (_RC,), (_KF,)),
+    # std_msgs/Empty: reconstruct now (recorded triggers replay).
+    Topic(TRIGGER, 'std_msgs/msg/Empty', 'reliable', (), (_RC,)),
+    # Each keyframe with its image, camera and pose: nothing but DDS between cart and base.
+    Topic(KEYFRAMES, 'stockpile_msgs/msg/Keyframe', 'stream', (_KF,), (_RC,)),
+    Topic(KEYFRAME_STATUS, 'stockpile_msgs/msg/PipelineStatus', 'latched', (_KF,), (_RC,)),
+    # The metric z-up surface the segmentation cuts into rocks.
+    Topic(SURFACE, 'stockpile_msgs/msg/SurfaceMesh', 'latched', (_RC,), (_SG,)),
+    # Absolute: the diagnostic aggregator listens there.
+    Topic(DIAGNOSTICS, 'diagnostic_msgs/msg/DiagnosticArray', 'latched', (_KF, _RC, _SG)),
+    Topic(DENSE_CLOUD, 'sensor_msgs/msg/PointCloud2', 'latched', (_RC,)),  # x, y, z, rgb
+    Topic(MESH, 'visualization_msgs/msg/MarkerArray', 'latched', (_RC,)),  # triangle list
+    Topic(SEGMENTED_CLOUD, 'sensor_msgs/msg/PointCloud2', 'latched', (_SG,)),  # + label
+    Topic(ROCK_MARKERS, 'visualization_msgs/msg/MarkerArray', 'latched', (_SG,)),
+    Topic(ROCKS, 'stockpile_msgs/msg/RockArray', 'latched', (_SG,)),
+    Topic(GRADATION, 'stockpile_msgs/msg/Gradation', 'latched', (_SG,)),
+    Topic(STATUS, 'stockpile_msgs/msg/PipelineStatus', 'latched', (_RC, _SG)),
+)
+
+
+def topic(name: str) -> Topic:
+    """Return the table's entry of ``name`` (relative or absolute).
+
+    Raises:
+        KeyError: Not a topic of the node set.
+
+    """
+    for entry in TABLE:
+        if absolute(entry.name) == absolute(name):
+            return entry
+    raise KeyError(f'{name} is not a topic of the node set')
+
+
+def absolute(name: str) -> str:
+    """Return ``name`` with a leading ``/`` (how the replay writes it into its bag)."""
+    return name if name.startswith('/') else '/' + name
+
+
+def published_by(component: str) -> tuple[Topic, ...]:
+    """Topics ``component`` publishes."""
+    return tuple(t for t in TABLE if component in t.publishers)
+
+
+def subscribed_by(component: str) -> tuple[Topic, ...]:
+    """Topics ``component`` subscribes to."""
+    return tuple(t for t in TABLE if component in t.subscribers)

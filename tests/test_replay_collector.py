@@ -63,15 +63,19 @@ def test_collects_stores_and_resumes(tmp_path: Path) -> None:
     assert 0.2 < odo.state.coverage < 0.7
 
 
-def test_odometry_buffer_nearest_within_gap() -> None:
-    buf = OdometryBuffer(max_gap_ns=100)
-    assert buf.at(0) is None
+def test_odometry_buffer_interpolates_between_the_samples_on_both_sides() -> None:
+    buf = OdometryBuffer(max_gap_ns=2000)
+    assert buf.at(0) is None and not buf.covers(0)
     buf.push(1000, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
+    assert buf.at(1500) is None and not buf.covers(1500)  # nothing after the stamp yet
     buf.push(2000, (5.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
-    entry = buf.at(1950)
-    assert entry is not None and entry['position'] == [5.0, 2.0, 3.0]
-    assert entry['frame_id'] == 'odom'
-    assert buf.at(1500) is None
+    assert buf.covers(1500) and buf.latest_ns == 2000
+    entry = buf.at(1750)
+    assert entry is not None and entry['position'] == pytest.approx([4.0, 2.0, 3.0])
+    assert (entry['frame_id'], entry['child_frame_id']) == ('odom', 'base_link')
+    assert buf.at(2500) is None  # after the last sample
+    buf.push(5000, (9.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
+    assert buf.at(3000) is None  # across a gap longer than max_gap_ns
 
 
 def test_odometry_buffer_places_the_camera_with_the_live_transforms() -> None:

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from ..camera import Frame
-from .keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
-from .transforms import TransformTree, camera_position
+from .keyframes import Decision, KeyframeRecord, KeyframeSelector, KeyframeStore, SelectorOptions
+from .transforms import MAX_GAP_NS, PoseSeries, TransformTree, odometry_entry
 
 __all__ = [
     'HEADING_SECTORS',
@@ -117,8 +117,33 @@ class KeyframeCollector:
             self.state.coverage = min(1.0, self._parallax / self.full_parallax)
             self.state.coverage_source = 'parallax'
 
+    def select(self, frame: Frame) -> Decision:
+        """Offer one frame to the selector and count its decision; nothing is stored yet.
+
+        A live stream stores an accepted frame once its odometry is known (:meth:`keep`).
+        """
+        decision = self.selector.push(frame.image)
+        self.state.frames += 1
+        self.state.decisions[decision.reason] = self.state.decisions.get(decision.reason, 0) + 1
+        self.state.last = decision
+        return decision
+
+    def keep(
+        self, frame: Frame, decision: Decision, odometry: dict[str, Any] | None = None
+    ) -> KeyframeRecord:
+        """Store an accepted frame as the next keyframe, with its odometry entry (or None)."""
+        record = self.store.add(frame, odometry=odometry, reason=decision.reason,
+                                 sharpness=decision.sharpness)  # fmt: skip
+        self.state.keyframes = len(self.store.records)
+        if math.isfinite(decision.parallax):
+            self._parallax += decision.parallax
+        if odometry is not None and 'orientation_xyzw' in odometry:
+            self._yaws.append(_yaw(odometry['orientation_xyzw']))
+        self._update_coverage()
+        return record
+
     def push(self, frame: Frame, odometry: dict[str, Any] | None = None) -> Decision:
-        """Offer one frame; store it when it is a keyframe.
+        """Offer one frame; store it at once when it is a keyframe (odometry known up front).
 
         Args:
             frame: The decoded frame (its ``camera`` is stored with it; None: self-calibration).
@@ -128,39 +153,37 @@ class KeyframeCollector:
             The selector's decision.
 
         """
-        decision = self.selector.push(frame.image)
-        self.state.frames += 1
-        self.state.decisions[decision.reason] = self.state.decisions.get(decision.reason, 0) + 1
-        self.state.last = decision
+        decision = self.select(frame)
         if decision.accepted:
-            self.store.add(frame, odometry=odometry, reason=decision.reason,
-                           sharpness=decision.sharpness)  # fmt: skip
-            self.state.keyframes = len(self.store.records)
-            if math.isfinite(decision.parallax):
-                self._parallax += decision.parallax
-            if odometry is not None and 'orientation_xyzw' in odometry:
-                self._yaws.append(_yaw(odometry['orientation_xyzw']))
-            self._update_coverage()
+            self.keep(frame, decision, odometry)
         return decision
 
 
 class OdometryBuffer:
-    """Recent odometry poses of a live stream, looked up at frame stamps.
+    """Recent odometry poses of a live stream, interpolated at frame stamps.
 
-    The live counterpart of :class:`~stockpile_ros.recon.sources.OdometryTrack`: the nearest pose
-    within ``max_gap_ns`` of the frame, and the camera centre when ``tree`` (fed from ``/tf_static``
-    and ``/tf``) links the camera's frame to the odometry's moving frame.
+    The live counterpart of :class:`~stockpile_ros.recon.sources.OdometryTrack`: a pose is read
+    between the samples on both sides of the frame's stamp (:meth:`covers` says when the later one
+    has arrived), and the camera's pose when ``tree`` (fed from ``/tf_static`` and ``/tf``) links
+    the camera's frame to the odometry's moving frame.
 
     Args:
         size: Poses kept.
-        max_gap_ns: Largest stamp difference accepted [ns].
+        max_gap_ns: Largest gap between the two samples interpolated across [ns].
 
     """
 
-    def __init__(self, size: int = 400, max_gap_ns: int = 200_000_000) -> None:
+    def __init__(self, size: int = 400, max_gap_ns: int = MAX_GAP_NS) -> None:
         self.max_gap_ns = max_gap_ns
         self.tree = TransformTree()
-        self._poses: deque[tuple[int, dict[str, Any]]] = deque(maxlen=size)
+        self._poses: deque[tuple[int, Any, Any]] = deque(maxlen=size)
+        self._frames = ('', '')
+        self._series: PoseSeries | None = None
+
+    @property
+    def latest_ns(self) -> int | None:
+        """Stamp of the newest sample, None before the first."""
+        return max(s[0] for s in self._poses) if self._poses else None
 
     def push(
         self,
@@ -170,32 +193,32 @@ class OdometryBuffer:
         frame_id: str,
         child_frame_id: str,
     ) -> None:
-        """Add one pose (in stamp order)."""
-        entry = {
-            'position': [float(v) for v in position],
-            'orientation_xyzw': [float(v) for v in orientation_xyzw],
-            'frame_id': frame_id,
-            'child_frame_id': child_frame_id,
-        }
-        self._poses.append((int(stamp_ns), entry))
+        """Add one pose (any order: the series is sorted by stamp)."""
+        self._poses.append((int(stamp_ns), [float(v) for v in position],
+                            [float(v) for v in orientation_xyzw]))  # fmt: skip
+        self._frames = (frame_id, child_frame_id)
+        self._series = None
+
+    def covers(self, stamp_ns: int) -> bool:
+        """Whether a sample at or after ``stamp_ns`` has arrived (so :meth:`at` is final)."""
+        latest = self.latest_ns
+        return latest is not None and latest >= stamp_ns
 
     def at(self, stamp_ns: int, camera_frame: str = '') -> dict[str, Any] | None:
-        """Return the ``keyframes.jsonl`` odometry entry nearest ``stamp_ns``, None if too far."""
+        """Return the ``keyframes.jsonl`` odometry entry at ``stamp_ns``.
+
+        None unless samples on both sides lie within ``max_gap_ns`` of each other. With
+        ``camera_frame``, the entry holds the camera's position and orientation when the
+        transforms link that frame to the odometry's moving frame.
+        """
         if not self._poses:
             return None
-        stamp, entry = min(self._poses, key=lambda p: abs(p[0] - stamp_ns))
-        if abs(stamp - stamp_ns) > self.max_gap_ns:
+        if self._series is None:
+            self._series = PoseSeries.build(list(self._poses))
+        pose = self._series.at(stamp_ns, self.max_gap_ns)
+        if pose is None:
             return None
-        entry = dict(entry)
-        if camera_frame:
-            centre = camera_position(
-                self.tree,
-                entry['position'],
-                entry['orientation_xyzw'],
-                entry['child_frame_id'],
-                camera_frame,
-                stamp_ns,
-            )
-            if centre is not None:
-                entry['camera_position'] = centre
-        return entry
+        position, rotation = pose
+        frame_id, child = self._frames
+        return odometry_entry(self.tree, position, rotation.as_quat(), frame_id, child,
+                              camera_frame, stamp_ns)  # fmt: skip

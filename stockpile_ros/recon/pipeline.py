@@ -99,8 +99,13 @@ class WorkFolder:
     root: Path
 
     @property
+    def capture(self) -> Path:
+        """The keyframe node's own copy of what it selected (PNGs, ``keyframes.jsonl``)."""
+        return self.root / 'capture'
+
+    @property
     def keyframes(self) -> Path:
-        """PNG keyframes and ``keyframes.jsonl``."""
+        """PNG keyframes and ``keyframes.jsonl``: what the reconstruction runs on."""
         return self.root / 'keyframes'
 
     @property
@@ -117,6 +122,11 @@ class WorkFolder:
     def mesh(self) -> Path:
         """``mesh.ply`` and ``mesh.json``."""
         return self.root / 'mesh'
+
+    @property
+    def surface(self) -> Path:
+        """The segmentation's copy of the surface it received (``mesh.ply``, ``mesh.json``)."""
+        return self.root / 'surface'
 
 
 def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
@@ -184,17 +194,18 @@ def _odometry_pairs(
     store: KeyframeStore, model: SparseModel
 ) -> tuple[list[str], npt.NDArray[np.int64], F64, F64]:
     """Return registered keyframes with odometry by stamp: names, stamps, centres, positions."""
+    # Only keyframes whose camera the transforms placed: the base is not where the camera is.
     rows = sorted(
         (r.stamp_ns, r.file, r.odometry)
         for r in store.records
-        if r.odometry is not None and r.file in model.views
+        if r.odometry is not None and 'camera_position' in r.odometry and r.file in model.views
     )
     names = [name for _, name, _ in rows]
     stamps = np.array([stamp for stamp, _, _ in rows], dtype=np.int64)
     centres = np.array([model.views[name].center for name in names]).reshape(-1, 3)
-    positions = np.array(
-        [odo.get('camera_position', odo['position']) for _, _, odo in rows], dtype=np.float64
-    ).reshape(-1, 3)
+    positions = np.array([odo['camera_position'] for _, _, odo in rows], dtype=np.float64).reshape(
+        -1, 3
+    )
     return names, stamps, centres, positions
 
 
@@ -245,17 +256,18 @@ def estimate_scale(
     odometry = None
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
+        odometry_only = [r.odometry for r in store.records if r.odometry is not None]
+        unplaced = sum(1 for odo in odometry_only if 'camera_position' not in odo)
+        if unplaced:
+            # Odometry without a /tf link from its base to the camera: no camera centre is known.
+            details['odometry'] = {'keyframes_without_camera_pose': unplaced}
         if names:
             odometry = scale_from_odometry(
                 dict(zip(stamps.tolist(), centres, strict=True)), stamps, positions
             )
             details['odometry'] = {
                 'keyframes': len(names),
-                'camera_offset_known': all(
-                    r.odometry is not None and 'camera_position' in r.odometry
-                    for r in store.records
-                    if r.odometry is not None
-                ),
+                'keyframes_without_camera_pose': unplaced,
                 'estimate': None if odometry is None else odometry.__dict__,
             }
             extent = _path_extent(positions)
@@ -311,10 +323,10 @@ def odom_from_stockpile(work: WorkFolder) -> tuple[str, Similarity] | None:
     src, dst, frame = [], [], ''
     for record in KeyframeStore(work.keyframes).records:
         odo = record.odometry
-        if odo is None or record.file not in in_stockpile:
+        if odo is None or 'camera_position' not in odo or record.file not in in_stockpile:
             continue
         src.append(in_stockpile[record.file])
-        dst.append(odo.get('camera_position', odo['position']))
+        dst.append(odo['camera_position'])
         frame = str(odo.get('frame_id', 'odom'))
     if len(src) < 3:
         return None

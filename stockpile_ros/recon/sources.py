@@ -15,7 +15,7 @@ import cv2
 
 from ..camera import Frame
 from ..errors import StockpileError
-from .transforms import PoseSeries, TransformTree, camera_position
+from .transforms import PoseSeries, TransformTree, odometry_entry
 
 __all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'OdometryTrack', 'iter_frames', 'source_kind']
 
@@ -140,16 +140,5 @@ class OdometryTrack:
         if pose is None:
             return None
         position, rotation = pose
-        entry: dict[str, Any] = {
-            'position': [float(v) for v in position],
-            'orientation_xyzw': [float(v) for v in rotation.as_quat()],
-            'frame_id': self.frame_id,
-            'child_frame_id': self.child_frame_id,
-        }
-        quat = rotation.as_quat()
-        centre = camera_position(
-            self.tree, position, quat, self.child_frame_id, self.camera_frame, stamp_ns
-        )
-        if centre is not None:
-            entry['camera_position'] = centre
-        return entry
+        return odometry_entry(self.tree, position, rotation.as_quat(), self.frame_id,
+                              self.child_frame_id, self.camera_frame, stamp_ns)  # fmt: skip

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from ..errors import StockpileError
 
-__all__ = ['PoseSeries', 'TransformTree', 'camera_position', 'pose_matrix']
+__all__ = ['MAX_GAP_NS', 'PoseSeries', 'TransformTree', 'odometry_entry', 'pose_matrix']
 
 F64 = npt.NDArray[np.float64]
 
@@ -142,22 +142,33 @@ class TransformTree:
         return None
 
 
-def camera_position(
+def odometry_entry(
     tree: TransformTree,
     position: Any,
     quat_xyzw: Any,
+    frame_id: str,
     base_frame: str,
     camera_frame: str,
     stamp_ns: int,
-) -> list[float] | None:
-    """Camera centre in the odometry frame, for the base pose ``position, quat_xyzw``.
+) -> dict[str, Any]:
+    """Return the ``keyframes.jsonl`` odometry entry of a base pose at ``stamp_ns``.
 
-    Returns:
-        ``[x, y, z]``, or None when the tree does not link the camera frame to the base.
-
+    ``camera_position`` and ``camera_orientation_xyzw`` (the camera's optical frame in the
+    odometry frame) are present only when ``tree`` links ``camera_frame`` to ``base_frame``: the
+    base's own position is never a camera centre.
     """
+    entry: dict[str, Any] = {
+        'position': [float(v) for v in np.asarray(position, dtype=np.float64)],
+        'orientation_xyzw': [float(v) for v in np.asarray(quat_xyzw, dtype=np.float64)],
+        'frame_id': frame_id,
+        'child_frame_id': base_frame,
+    }
+    if not camera_frame:
+        return entry
     base_to_camera = tree.chain(base_frame.lstrip('/'), camera_frame, stamp_ns)
-    if base_to_camera is None:
-        return None
-    cam = pose_matrix(position, quat_xyzw) @ base_to_camera
-    return [float(v) for v in cam[:3, 3]]
+    if base_to_camera is not None:
+        cam = pose_matrix(position, quat_xyzw) @ base_to_camera
+        entry['camera_position'] = [float(v) for v in cam[:3, 3]]
+        quat = Rotation.from_matrix(cam[:3, :3]).as_quat()
+        entry['camera_orientation_xyzw'] = [float(v) for v in quat]
+    return entry

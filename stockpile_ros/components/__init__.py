@@ -1,0 +1,19 @@
+"""The node set's components, free of ROS: one per node, each owning its state and its messages.
+
+Each takes messages as plain data (rosbags or rclpy objects: the same field names) and returns,
+or emits, the ``(topic, message)`` pairs to publish. The nodes in :mod:`stockpile_ros.nodes` wire
+them to rclpy; :mod:`stockpile_ros.replay` drives them from a bag. Topics: :mod:`.topics`.
+"""
+
+from .keyframes import KeyframeComponent, KeyframeCounts
+from .reconstruction import Emit, ReconstructionComponent
+from .segmentation import SegmentationComponent, verdict
+
+__all__ = [
+    'Emit',
+    'KeyframeComponent',
+    'KeyframeCounts',
+    'ReconstructionComponent',
+    'SegmentationComponent',
+    'verdict',
+]

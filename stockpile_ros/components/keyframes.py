@@ -1,0 +1,181 @@
+"""The keyframe component: camera, camera info, odometry and tf in; keyframes and a status out.
+
+The same object runs inside the keyframe node (rclpy messages) and the replay (rosbags messages).
+A frame the selector keeps waits until odometry has a sample at or after its stamp, so that its
+pose is interpolated between the samples on both sides whatever order the topics arrive in; once
+the frames have moved past it by more than the interpolation gap no later sample can help, and it
+goes out without odometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from .. import topics
+from ..bagio.images import ImageError, decode_image
+from ..bagio.reader import CameraInfoError, camera_model_from_msg, message_stamp_ns
+from ..camera import CameraModel, Frame
+from ..messages import MessageFactory
+from ..publish import Publication, diagnostics, keyframe_status
+from ..recon.collector import KeyframeCollector, OdometryBuffer
+from ..recon.keyframes import Decision
+from ..recon.pipeline import WorkFolder
+from ..settings import Settings
+from .handoff import keyframe_image, keyframe_message
+
+__all__ = ['KeyframeComponent', 'KeyframeCounts']
+
+
+@dataclass
+class KeyframeCounts:
+    """What the component saw beyond the collector's state.
+
+    Attributes:
+        camera_info: Usable CameraInfo messages.
+        skipped: Frames that could not be decoded, by reason.
+        without_odometry: Keyframes sent without an odometry pose although odometry was asked for.
+
+    """
+
+    camera_info: int = 0
+    skipped: dict[str, int] = field(default_factory=dict)
+    without_odometry: int = 0
+
+
+@dataclass
+class _Pending:
+    frame: Frame
+    decision: Decision
+    image: tuple[str, bytes]
+
+
+class KeyframeComponent:
+    """Select keyframes from a camera stream and hand them on as ``Keyframe`` messages.
+
+    Args:
+        settings: Parameters (selector, odometry use, work folder).
+        f: Message factory of the library the messages are built with.
+
+    """
+
+    def __init__(self, settings: Settings, f: MessageFactory) -> None:
+        self.f = f
+        self.use_odometry = settings.recon.use_odometry
+        self.collector = KeyframeCollector(
+            WorkFolder(settings.work_dir).capture,
+            settings.recon.selector,
+            float(settings.values['coverage_full_parallax']),
+        )
+        self.odometry = OdometryBuffer()
+        self.camera: CameraModel | None = None
+        self.counts = KeyframeCounts()
+        self._pending: list[_Pending] = []
+        self._latest_frame_ns = 0
+        self._noted: set[str] = set()
+
+    @property
+    def pending(self) -> int:
+        """Keyframes kept but still waiting for their odometry."""
+        return len(self._pending)
+
+    def _note(self, key: str, level: str, text: str, stamp_ns: int) -> list[Publication]:
+        """Return a diagnostic, once per ``key``."""
+        if key in self._noted:
+            return []
+        self._noted.add(key)
+        return [diagnostics(self.f, stamp_ns, key.split(':')[0], level, text)]
+
+    def on_camera_info(self, msg: Any, log_ns: int) -> list[Publication]:
+        """Keep the latest usable camera model."""
+        try:
+            self.camera = camera_model_from_msg(msg)
+        except CameraInfoError as exc:
+            self.camera = None
+            return self._note('camera_info:bad', 'WARN', f'{exc}; frames are self-calibrated',
+                              log_ns)  # fmt: skip
+        self.counts.camera_info += 1
+        return []
+
+    def on_odometry(self, msg: Any, log_ns: int) -> list[Publication]:
+        """Buffer the pose; send the keyframes it completes."""
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        stamp = message_stamp_ns(msg, log_ns)
+        frames = (str(msg.header.frame_id), str(msg.child_frame_id))
+        self.odometry.push(stamp, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), *frames)
+        return self._resolve(final=False)
+
+    def on_tf(self, msg: Any, static: bool, log_ns: int) -> list[Publication]:
+        """Keep the cart's transforms (``/tf_static``: the camera mount; ``/tf``: a moving mast)."""
+        self.odometry.tree.add(msg, static=static, log_ns=log_ns)
+        return []
+
+    def on_image(self, msg: Any, log_ns: int) -> list[Publication]:
+        """Offer one frame to the selector; return the status and any keyframes completed."""
+        stamp = message_stamp_ns(msg, log_ns)
+        try:
+            image = decode_image(msg)
+        except ImageError as exc:
+            reason = str(exc)
+            self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1
+            return self._note(f'camera:{reason}', 'ERROR', f'frame skipped: {reason}', stamp)
+        out: list[Publication] = []
+        camera = self.camera
+        if camera is None:
+            out += self._note('camera_info:none', 'WARN',
+                              'no CameraInfo for the images: the intrinsics are self-calibrated '
+                              'by Structure-from-Motion', stamp)  # fmt: skip
+        elif not camera.fits(image):
+            out += self._note('camera_info:size', 'WARN',
+                              f'CameraInfo is {camera.width}x{camera.height} but the images are '
+                              f'{image.shape[1]}x{image.shape[0]}: such frames are '
+                              'self-calibrated', stamp)  # fmt: skip
+            camera = None
+        frame = Frame(stamp, image, str(msg.header.frame_id), camera, topics.IMAGE,
+                      self.collector.state.frames)  # fmt: skip
+        decision = self.collector.select(frame)
+        self._latest_frame_ns = max(self._latest_frame_ns, stamp)
+        if decision.accepted:
+            self._pending.append(_Pending(frame, decision, keyframe_image(msg, image)))
+        out += self._resolve(final=False)
+        out.append(keyframe_status(self.f, stamp, self.collector.state))
+        return out
+
+    def flush(self, stamp_ns: int) -> list[Publication]:
+        """Send every waiting keyframe with the odometry known now, and count the frames skipped.
+
+        For the end of a recording, where nothing more will complete them.
+        """
+        out = self._resolve(final=True)
+        if out:
+            out.append(keyframe_status(self.f, stamp_ns, self.collector.state))
+        if self.counts.skipped:
+            total = sum(self.counts.skipped.values())
+            why = '; '.join(f'{n} x {reason}' for reason, n in self.counts.skipped.items())
+            out.append(diagnostics(self.f, stamp_ns, 'camera', 'ERROR',
+                                   f'{total} frames skipped: {why}'))  # fmt: skip
+        return out
+
+    def _ready(self, stamp_ns: int) -> bool:
+        if not self.use_odometry or self.odometry.covers(stamp_ns):
+            return True
+        # Past the gap, a later sample could not be interpolated across any more.
+        return self._latest_frame_ns - stamp_ns > self.odometry.max_gap_ns
+
+    def _resolve(self, final: bool) -> list[Publication]:
+        """Store and send the waiting keyframes whose odometry is known, in order."""
+        out: list[Publication] = []
+        while self._pending and (final or self._ready(self._pending[0].frame.stamp_ns)):
+            item = self._pending.pop(0)
+            frame = item.frame
+            odometry = None
+            if self.use_odometry:
+                camera_frame = frame.camera.frame_id if frame.camera else frame.frame_id
+                odometry = self.odometry.at(frame.stamp_ns, camera_frame)
+                if odometry is None:
+                    self.counts.without_odometry += 1
+            number = len(self.collector.store.records)
+            record = self.collector.keep(frame, item.decision, odometry)
+            msg = keyframe_message(self.f, record, number, frame.frame_id, item.image)
+            out.append((topics.KEYFRAMES, msg))
+        return out
