@@ -108,8 +108,9 @@ def test_reconstruction_outputs_move_the_cloud_and_decimate(tmp_path: Path) -> N
     for i, position in enumerate([[0, 0, 1], [1, 0, 1], [1, 1, 1.5], [0, 1, 1.2]]):
         # The camera sits 0.5 m above a base that the fit must not take for it.
         camera = (turn.apply(position) + shift).tolist()
-        odometry = {'position': [camera[0], camera[1], camera[2] - 0.5], 'frame_id': 'odom',
-                    'orientation_xyzw': [0.0, 0.0, 0.0, 1.0], 'camera_position': camera}  # fmt: skip
+        base = [camera[0], camera[1], camera[2] - 0.5]
+        odometry = {'position': base, 'frame_id': 'odom', 'camera_position': camera,
+                    'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]}  # fmt: skip
         frame = Frame(i, np.zeros((4, 4, 3), np.uint8), 'camera_optical_frame', index=i)
         record = store.add(frame, odometry=odometry)
         keyframes.append({'stamp_ns': i, 'file': record.file, 'position': position,
