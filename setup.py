@@ -28,13 +28,15 @@ setup(
         'open3d-cpu>=0.19; platform_machine=="x86_64"',
         'open3d>=0.19; platform_machine!="x86_64"',
         'pycolmap>=3.11',
-        'rosbags>=0.10',
+        # 0.11: offered QoS per connection; the writer relies on its <folder>/<folder>.mcap naming.
+        'rosbags>=0.11,<0.12',
         'tqdm>=4.60',
         'matplotlib>=3.7',
         'PyYAML>=6',
     ],
     extras_require={
-        'test': ['pytest>=7', 'ruff>=0.5', 'mypy>=1.10', 'types-PyYAML'],
+        # mcap: an independent reader to check the MCAP files we write (chunks, channel metadata).
+        'test': ['pytest>=7', 'ruff>=0.5', 'mypy>=1.10', 'types-PyYAML', 'mcap>=1.1,<2'],
     },
     zip_safe=True,
     maintainer='stockpile_ros maintainers',

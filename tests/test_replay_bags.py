@@ -63,6 +63,8 @@ def test_too_few_keyframes_at_a_recorded_trigger(tmp_path: Path) -> None:
     summary = replay(bag, tmp_path / 'out', build_settings())
     assert not summary.ok and summary.triggers == 1  # the recorded trigger, not the end
     assert summary.camera_info
+    # One MCAP file, not a rosbag2 folder.
+    assert summary.output_bag == tmp_path / 'out' / 'replay.mcap' and summary.output_bag.is_file()
     msgs = _read(summary.output_bag)
     assert len(msgs['/camera/image_raw']) == 3 and len(msgs['/camera/camera_info']) == 3
     # One status per frame, and one more when the end of the bag sends the last keyframe (the bag
