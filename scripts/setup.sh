@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One-time set-up on Debian/Ubuntu with Python 3.10-3.12: system packages, virtual environment,
-# the package itself. Idempotent: re-running it only installs what is missing.
+# the package itself, then ROS 2 Jazzy and our interface packages (scripts/setup_ros.sh).
+# Idempotent: re-running it only installs what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python=${PYTHON:-python3}
@@ -21,3 +22,5 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
+# After the project: the interface packages compile against the numpy installed above.
+bash scripts/setup_ros.sh

@@ -13,10 +13,10 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosidl_runtime_py.utilities import get_message
 
 from ..publish import Publication
 from ..settings import Setting, Settings, build_settings, settings_for
+from .interfaces import get_message
 
 __all__ = [
     'LATCHED',
