@@ -33,6 +33,8 @@ _INFO = 'sensor_msgs/msg/CameraInfo'
 _TF = 'tf2_msgs/msg/TFMessage'
 _EMPTY = 'std_msgs/msg/Empty'
 _ODOMETRY = 'nav_msgs/msg/Odometry'
+# Offered as transient local in the output bag, so that `ros2 bag play` republishes them latched.
+_LATCHED_QOS = ('latched', 'tf_static')
 
 
 @dataclass
@@ -146,7 +148,7 @@ class _Rig:
 def replay(
     bag: str | Path, out: str | Path, settings: Settings, topic: str | None = None
 ) -> ReplaySummary:
-    """Replay ``bag`` into ``out``: ``work/``, ``result/`` and the ``replay.mcap`` bag.
+    """Replay ``bag`` into ``out``: ``work/``, ``result/`` and the ``replay.mcap`` file.
 
     Args:
         bag: Input bag (folder, ``.mcap`` or ``.db3``).
@@ -194,7 +196,8 @@ def replay(
             routes[info_topic] = 'info'
         counts = reader.reader.topics
         total = sum(counts[t].msgcount for t in routes if t in counts) or None
-        with BagWriter(output_bag) as writer:
+        latched = {topics.absolute(t.name) for t in topics.TABLE if t.qos in _LATCHED_QOS}
+        with BagWriter(output_bag, latched=latched) as writer:
             rig = _Rig(settings, writer, summary)
             _stream(reader, rig, stats, routes, total)
     kf = rig.keyframes

@@ -1,4 +1,4 @@
-"""What every node shares: the rclpy message factory, parameters from the settings table, QoS."""
+"""What every node shares: the rclpy message factory, parameters, QoS and topics from the tables."""
 
 from __future__ import annotations
 
@@ -8,34 +8,47 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.callback_groups import CallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from .. import topics
+from ..errors import StockpileError
 from ..publish import Publication
 from ..settings import Setting, Settings, build_settings, settings_for
 from .interfaces import get_message
 
 __all__ = [
-    'LATCHED',
     'Publishers',
     'RclpyFactory',
     'SingleRun',
     'current_settings',
     'declare_settings',
     'now_ns',
+    'qos_profile',
     'spin',
+    'subscribe',
 ]
 
-LATCHED = QoSProfile(
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    history=HistoryPolicy.KEEP_LAST,
-)
-"""Results: a dashboard that connects late still gets the last one (subscribe the same way)."""
+
+def qos_profile(qos: topics.Qos) -> QoSProfile:
+    """Return the rclpy profile of a QoS class of the topic table (see :data:`topics.Qos`)."""
+    depth = topics.QOS_DEPTH[qos]
+    history = HistoryPolicy.KEEP_ALL if depth == 0 else HistoryPolicy.KEEP_LAST
+    reliability = ReliabilityPolicy.BEST_EFFORT if qos == 'sensor' else ReliabilityPolicy.RELIABLE
+    durable = qos in ('latched', 'tf_static')
+    durability = DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE
+    return QoSProfile(history=history, depth=max(depth, 1), reliability=reliability,
+                      durability=durability)  # fmt: skip
 
 
 class SingleRun:
@@ -45,6 +58,12 @@ class SingleRun:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
 
+    @property
+    def busy(self) -> bool:
+        """Whether a run is going on."""
+        with self._lock:
+            return self._thread is not None and self._thread.is_alive()
+
     def start(self, target: Callable[..., None], *args: Any) -> bool:
         """Start ``target(*args)`` unless a run is still going on; return whether it started."""
         with self._lock:
@@ -53,6 +72,14 @@ class SingleRun:
             self._thread = threading.Thread(target=target, args=args, daemon=True)
             self._thread.start()
             return True
+
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait for the run in progress; return whether none is left."""
+        with self._lock:
+            thread = self._thread
+        if thread is not None:
+            thread.join(timeout_s)
+        return thread is None or not thread.is_alive()
 
 
 class RclpyFactory:
@@ -69,9 +96,21 @@ class RclpyFactory:
         return out
 
     def f64(self, data: Any) -> Any:
-        """Return a list of floats (rclpy accepts it for fixed and unbounded ``float64[]``)."""
-        flat = data.reshape(-1).tolist() if hasattr(data, 'reshape') else list(data)
-        return [float(v) for v in flat]
+        """Return ``array('d')`` (rclpy takes it for fixed and unbounded ``float64[]``)."""
+        return _array('d', 'f8', data)
+
+    def u32(self, data: Any) -> Any:
+        """Return ``array('I')`` for ``uint32[]``."""
+        return _array('I', 'u4', data)
+
+
+def _array(code: str, dtype: str, data: Any) -> array.array[Any]:
+    if hasattr(data, 'astype'):
+        # numpy: one copy through the buffer, not a Python object per element.
+        out = array.array(code)
+        out.frombytes(data.astype(dtype).reshape(-1).tobytes())
+        return out
+    return array.array(code, data)
 
 
 def _descriptor(setting: Setting) -> ParameterDescriptor:
@@ -94,9 +133,24 @@ def _descriptor(setting: Setting) -> ParameterDescriptor:
 
 
 def declare_settings(node: Node, component: str) -> None:
-    """Declare the parameters of ``component`` (settings table) with descriptors and ranges."""
+    """Declare the parameters of ``component`` (settings table); refuse bad values when set.
+
+    Every change is checked as the command line checks it (type, finiteness, range, choices,
+    a target spec that parses) before it is accepted, so a worker never starts with it.
+    """
     for setting in settings_for(component):
         node.declare_parameter(setting.name, setting.default, _descriptor(setting))
+
+    def check(params: list[Parameter]) -> SetParametersResult:
+        values = {s.name: node.get_parameter(s.name).value for s in settings_for(component)}
+        values.update({p.name: p.value for p in params if p.name in values})
+        try:
+            build_settings(values)
+        except StockpileError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(check)
 
 
 def current_settings(node: Node, component: str) -> Settings:
@@ -112,31 +166,57 @@ def now_ns(node: Node) -> int:
     return stamp
 
 
+def subscribe(
+    node: Node,
+    name: str,
+    callback: Callable[[Any], None],
+    group: CallbackGroup | None = None,
+) -> None:
+    """Subscribe to a topic of the table with its type and QoS."""
+    entry = topics.topic(name)
+    node.create_subscription(get_message(entry.msgtype), entry.name, callback,
+                             qos_profile(entry.qos), callback_group=group)  # fmt: skip
+
+
 class Publishers:
-    """Latched publishers by topic, created up front, fed with ``(topic, message)`` pairs.
+    """The publishers of a component's topics (topic table), fed with ``(topic, message)`` pairs.
+
+    Warnings and errors among the diagnostics are logged too, so the console says what the
+    dashboards show.
 
     Args:
         node: The node that owns them.
-        types: Message type (``pkg/msg/Name``) by relative topic name.
+        component: The component whose topics these are.
 
     """
 
-    def __init__(self, node: Node, types: dict[str, str]) -> None:
+    def __init__(self, node: Node, component: str) -> None:
+        self._logger = node.get_logger()
         self._pubs: dict[str, Publisher] = {
-            topic: node.create_publisher(get_message(msgtype), topic, LATCHED)
-            for topic, msgtype in types.items()
+            entry.name: node.create_publisher(
+                get_message(entry.msgtype), entry.name, qos_profile(entry.qos)
+            )
+            for entry in topics.published_by(component)
         }
 
     def publish(self, publications: list[Publication]) -> None:
         """Publish each message on its topic."""
-        for topic, msg in publications:
-            self._pubs[topic].publish(msg)
+        for name, msg in publications:
+            self._pubs[name].publish(msg)
+            if name == topics.DIAGNOSTICS:
+                self._log([s for s in msg.status if s.level != msg.status[0].OK])
+
+    def _log(self, statuses: list[Any]) -> None:
+        text = '; '.join(f'{s.name}: {s.message}' for s in statuses)
+        if text:
+            self._logger.warning(text)
 
 
 def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
     """Run nodes in one process on a multi-threaded executor until shut down.
 
-    Multi-threaded so that a service or a trigger is answered while a worker runs a stage.
+    Multi-threaded so that a service or a trigger is answered while a worker runs a stage. On
+    shutdown each node's ``close()`` (when it has one) waits for its worker.
     """
     rclpy.init(args=args)
     nodes: list[Node] = []
@@ -151,5 +231,6 @@ def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
     finally:
         executor.shutdown()
         for node in nodes:
+            getattr(node, 'close', lambda: None)()
             node.destroy_node()
         rclpy.try_shutdown()

@@ -1,21 +1,17 @@
-"""Reconstruction node: on a trigger, the sfm, dense and mesh stages run in a worker thread."""
+"""Reconstruction node: keyframes in; on a trigger sfm, dense and mesh run in a worker thread."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from std_msgs.msg import Empty, String
 from std_srvs.srv import Trigger
-from stockpile_msgs.msg import PipelineStatus
 
 from .. import topics
-from ..publish import reconstruction_diagnostics, reconstruction_outputs, status
-from ..recon.collector import CollectorState
-from ..runner import RECON_STAGES, run_reconstruction
+from ..components import ReconstructionComponent
+from ..publish import diagnostics
 from .common import (
-    LATCHED,
     Publishers,
     RclpyFactory,
     SingleRun,
@@ -23,37 +19,31 @@ from .common import (
     declare_settings,
     now_ns,
     spin,
+    subscribe,
 )
 
-__all__ = ['ReconstructionNode', 'main']
+__all__ = ['KEYFRAME_WAIT_S', 'ReconstructionNode', 'main']
+
+KEYFRAME_WAIT_S = 10.0
+"""How long a run waits for keyframes announced but still on the network (a slow Wi-Fi link)."""
 
 
 class ReconstructionNode(Node):
-    """Reconstruct the stored keyframes on request; one run at a time, the node stays responsive."""
+    """Reconstruct the keyframes received on request; one run at a time, callbacks stay responsive."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('stockpile_reconstruction', **kwargs)
         declare_settings(self, 'reconstruction')
         self.f = RclpyFactory()
+        self.component = ReconstructionComponent(current_settings(self, 'reconstruction'), self.f)
         self.worker = SingleRun()
-        self.keyframes = 0
-        self.auto_started_at = 0
-        self.pubs = Publishers(self, {
-            topics.STATUS: 'stockpile_msgs/msg/PipelineStatus',
-            topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
-            topics.DENSE_CLOUD: 'sensor_msgs/msg/PointCloud2',
-            topics.MESH: 'visualization_msgs/msg/MarkerArray',
-            topics.MESH_READY: 'std_msgs/msg/String',
-            topics.TF_STATIC: 'tf2_msgs/msg/TFMessage',
-        })  # fmt: skip
+        self.pubs = Publishers(self, 'reconstruction')
         # The service answers while a run is in progress: its own group, never blocked by others.
         self.create_service(Trigger, topics.RECONSTRUCT_SERVICE, self.on_service,
                             callback_group=MutuallyExclusiveCallbackGroup())  # fmt: skip
-        triggers = ReentrantCallbackGroup()
-        self.create_subscription(Empty, topics.TRIGGER, self.on_trigger, 10,
-                                 callback_group=triggers)  # fmt: skip
-        self.create_subscription(PipelineStatus, topics.KEYFRAME_STATUS, self.on_keyframes,
-                                 LATCHED, callback_group=triggers)  # fmt: skip
+        subscribe(self, topics.TRIGGER, self.on_trigger, MutuallyExclusiveCallbackGroup())
+        subscribe(self, topics.KEYFRAMES, self.on_keyframe)
+        subscribe(self, topics.KEYFRAME_STATUS, self.on_keyframe_status)
 
     def start(self, why: str) -> tuple[bool, str]:
         """Start a run in the worker thread unless one is running; return whether and why."""
@@ -67,61 +57,33 @@ class ReconstructionNode(Node):
         response.success, response.message = self.start('service')
         return response
 
-    def on_trigger(self, msg: Empty) -> None:
+    def on_trigger(self, msg: Any) -> None:
         """Trigger topic (recorded triggers replay)."""
         ok, message = self.start('trigger topic')
         if not ok:
             self.get_logger().warning(f'trigger refused: {message}')
 
-    def on_keyframes(self, msg: PipelineStatus) -> None:
-        """Track the keyframe count; start on our own after ``auto_trigger_keyframes``."""
-        self.keyframes = int(msg.keyframes)
-        threshold = int(self.get_parameter('auto_trigger_keyframes').value)
-        if threshold > 0 and self.keyframes >= threshold and self.auto_started_at == 0:
-            self.auto_started_at = self.keyframes
-            self.start(f'{self.keyframes} keyframes')
+    def on_keyframe(self, msg: Any) -> None:
+        """Store the keyframe in this node's work folder."""
+        self.pubs.publish(self.component.on_keyframe(msg, now_ns(self)))
+
+    def on_keyframe_status(self, msg: Any) -> None:
+        """Track the keyframes announced; start on our own after ``auto_trigger_keyframes``."""
+        if self.component.on_keyframe_status(msg):
+            self.start(f'{msg.keyframes} keyframes')
 
     def run(self, stamp_ns: int) -> None:
-        """Run the stages (worker thread); publish progress, failures and results."""
+        """Run the stages (worker thread); publish progress, failures and results as they come."""
+        missing = self.component.wait_for_keyframes(KEYFRAME_WAIT_S)
+        if missing:
+            text = f'{missing} announced keyframes did not arrive within {KEYFRAME_WAIT_S:.0f} s'
+            self.pubs.publish([diagnostics(self.f, stamp_ns, 'keyframes', 'WARN', text)])
         settings = current_settings(self, 'reconstruction')
-        f = self.f
-        held = CollectorState(keyframes=self.keyframes)  # as last reported by the keyframe node
+        self.component.run(settings, stamp_ns, self.pubs.publish)
 
-        def on_stage(stage: str, index: int, seconds: float | None) -> None:
-            if seconds is None:
-                self.pubs.publish(
-                    [
-                        status(
-                            f,
-                            now_ns(self),
-                            'RECONSTRUCTING',
-                            stage,
-                            held,
-                            f'running {stage}',
-                            progress=index / len(RECON_STAGES),
-                        )
-                    ]
-                )
-
-        outcome = run_reconstruction(settings, on_stage)
-        self.pubs.publish(reconstruction_diagnostics(f, stamp_ns, outcome))
-        if not outcome.ok:
-            self.get_logger().error(f'{outcome.stage}: {outcome.reason}. {outcome.advice}')
-            self.pubs.publish(
-                [status(f, stamp_ns, 'FAILED', outcome.stage, held, outcome.reason, outcome.advice)]
-            )
-            return
-        self.pubs.publish(
-            reconstruction_outputs(
-                f,
-                stamp_ns,
-                settings.work_dir,
-                settings.frame_id,
-                int(settings.values['display_max_faces']),
-            )
-        )
-        self.pubs.publish([(topics.MESH_READY, String(data=str(settings.work_dir)))])
-        self.pubs.publish([status(f, stamp_ns, 'SEGMENTING', 'mesh', held, 'mesh ready')])
+    def close(self) -> None:
+        """Wait for a run in progress (shutdown)."""
+        self.worker.join()
 
 
 def main(args: list[str] | None = None) -> None:
