@@ -1,48 +1,61 @@
-"""One table of every tunable parameter, shared by the ROS 2 nodes and ``stockpile replay``.
+"""One table of every tunable parameter, shared by the ROS 2 nodes and the ``stockpile`` commands.
 
-The table is derived from the option dataclasses of the stages (their defaults and the
-``Attributes:`` section of their docstrings) plus a few node-level settings. The nodes declare
-exactly these parameters (dotted names such as ``sfm.max_features``, which is how ROS 2 spells
-nested YAML); the replay reads the same names from the same ``config/stockpile.yaml``.
+The table is derived from the option dataclasses of the stages plus a few node-level settings.
+Each field carries its type (``Literal[...]`` for a choice), its default, its range (a
+:class:`~stockpile_ros.ranges.Range` in ``Annotated``) and, in the ``Attributes:`` section of the
+class docstring, its description. The nodes declare exactly these parameters (dotted names such as
+``sfm.max_features``, which is how ROS 2 spells nested YAML); ``stockpile reconstruct``,
+``segment`` and ``replay`` read the same names from the same files (``--params``, ``--set``).
+
+Every value is checked when it is loaded (:func:`check_value`: type, finite, range, choice, target
+spec), before any stage runs; :func:`write_effective` records the values a run used.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import difflib
 import inspect
+import math
 import re
 import textwrap
 import typing
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeAlias
+from typing import Annotated, Any, Literal, TypeAlias
 
 import yaml
 
 from .errors import StockpileError
+from .ranges import Range
 from .recon.dense import DenseOptions
 from .recon.keyframes import SelectorOptions
 from .recon.pipeline import ReconOptions
 from .recon.scale import TargetSpec
 from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions
+from .segment.gradation import load_class_table
 from .segment.measure import MeasureParams
 from .segment.segmentation import SegmentParams
 
 __all__ = [
+    'EFFECTIVE_PARAMS',
     'NODES',
     'NODE_NAMES',
     'SETTINGS',
     'Setting',
     'Settings',
     'build_settings',
+    'check_value',
     'defaults',
     'flatten',
+    'get_setting',
     'load_params_yaml',
     'render_params_yaml',
     'settings_for',
+    'write_effective',
 ]
 
 Value: TypeAlias = bool | int | float | str
@@ -52,6 +65,9 @@ NODES = ('keyframes', 'reconstruction', 'segmentation')
 
 NODE_NAMES = tuple(f'stockpile_{n}' for n in NODES)
 """ROS node names of the components (as in launch/stockpile.launch.py)."""
+
+EFFECTIVE_PARAMS = 'params.yaml'
+"""File name :func:`write_effective` writes into a work or result folder."""
 
 
 @dataclass(frozen=True)
@@ -67,6 +83,8 @@ class Setting:
         high: Largest allowed value (numbers only).
         choices: Allowed values of a string, empty when free.
         read_only: Fixed once a node has started.
+        parse_text: Checks a non-empty string value further (the target spec), raising
+            StockpileError with the reason.
 
     """
 
@@ -78,98 +96,81 @@ class Setting:
     high: float | None = None
     choices: tuple[str, ...] = ()
     read_only: bool = False
+    parse_text: Callable[[str], object] | None = field(default=None, compare=False, repr=False)
+
+    def _allowed(self) -> str:
+        if self.low is not None and self.high is not None:
+            return f'[{self.low:g}, {self.high:g}]'
+        return 'a finite number'
 
     def check(self, value: Any) -> Value:
-        """Return ``value`` converted to this setting's type.
+        """Return ``value`` converted to this setting's type (an int is taken for a float).
 
         Raises:
-            StockpileError: Wrong type, outside the range, or not one of the choices.
+            StockpileError: Wrong type, not finite, outside the range, not one of the choices, or
+                a target spec that does not parse; the message names the parameter, the value and
+                what is allowed.
 
         """
         kind = type(self.default)
-        ok = isinstance(value, kind) and not (kind is int and isinstance(value, bool))
         if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value, ok = float(value), True
-        if not ok:
+            value = float(value)
+        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
             raise StockpileError(f'parameter {self.name}: expected {kind.__name__}, got {value!r}')
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if number and (
-            (self.low is not None and value < self.low)
-            or (self.high is not None and value > self.high)
-        ):
+        if isinstance(value, float) and not math.isfinite(value):
             raise StockpileError(
-                f'parameter {self.name}: {value} is outside [{self.low}, {self.high}]'
+                f'parameter {self.name}: {value} is not a finite number (allowed: '
+                f'{self._allowed()})'
             )
+        # Written as one chained comparison so that nothing unordered can slip through it.
+        if (
+            isinstance(value, (int, float))
+            and not isinstance(value, bool)
+            and self.low is not None
+            and self.high is not None
+            and not self.low <= value <= self.high
+        ):
+            raise StockpileError(f'parameter {self.name}: {value} is outside {self._allowed()}')
         if self.choices and value not in self.choices:
             raise StockpileError(
                 f'parameter {self.name}: {value!r} is not one of {", ".join(self.choices)}'
             )
+        if self.parse_text is not None and isinstance(value, str) and value:
+            try:
+                self.parse_text(value)
+            except StockpileError as exc:
+                raise StockpileError(f'parameter {self.name}: {exc}') from exc
         checked: Value = value
         return checked
 
+    def parse(self, text: str) -> Value:
+        """Return the value command-line ``text`` gives this setting, checked.
 
-# Ranges of every number in the table: [low, high].
-_RANGES: dict[str, tuple[float, float]] = {
-    'selector.work_width': (32, 4096),
-    'selector.blur_ratio': (0.0, 1.0),
-    'selector.reference_frames': (1, 1000),
-    'selector.min_parallax': (0.0, 1.0),
-    'selector.min_tracked': (0.0, 1.0),
-    'selector.min_spacing': (1, 10000),
-    'selector.max_spacing': (0, 100000),
-    'selector.max_keyframes': (2, 10000),
-    'selector.max_corners': (8, 10000),
-    'sfm.max_image_size': (64, 16384),
-    'sfm.max_features': (64, 65536),
-    'sfm.overlap': (1, 1000),
-    'sfm.num_threads': (-1, 256),
-    'sfm.min_registered_fraction': (0.0, 1.0),
-    'sfm.min_features': (0, 65536),
-    'sfm.min_triangulation_angle': (0.0, 90.0),
-    'sfm.log_level': (0, 3),
-    'dense.work_width': (64, 16384),
-    'dense.stride': (1, 64),
-    'dense.pair_window': (1, 100),
-    'dense.partners': (1, 8),
-    'dense.target_baseline': (0.0, 10.0),
-    'dense.check_window': (0, 100),
-    'dense.min_agree': (0, 100),
-    'dense.depth_tolerance': (0.0, 1.0),
-    'dense.voxel': (0.0, 1e6),
-    'dense.block_size': (1, 31),
-    'poisson.depth': (4, 14),
-    'poisson.density_quantile': (0.0, 0.9),
-    'poisson.max_distance': (0.0, 1000.0),
-    'poisson.margin': (0.0, 1.0),
-    'poisson.target_faces': (0, 100_000_000),
-    'poisson.threads': (0, 1024),
-    'recon.crop_radius': (0.0, 100.0),
-    'recon.odometry_tolerance': (0.0, 10.0),
-    'segment.threshold': (-1.0, 2.0),
-    'segment.normal_smoothing': (0, 100),
-    'segment.ground_tolerance': (0.0, 10.0),
-    'segment.ground_min_nz': (0.0, 1.0),
-    'segment.min_region_fraction': (0.0, 1.0),
-    'segment.min_region_faces': (0, 100_000_000),
-    'segment.border_depth': (0.0, 10.0),
-    'segment.border_min_edges': (0, 100_000_000),
-    'segment.valley_depth': (0.0, 1.0),
-    'segment.valley_radius': (1e-4, 1.0),
-    'segment.split_depth': (0.0, 1.0),
-    'segment.split_radius': (1e-4, 1.0),
-    'segment.split_min_share': (0.0, 0.5),
-    'measure.specific_gravity': (0.5, 10.0),
-    'measure.min_faces': (0, 100_000_000),
-    'measure.height_bins': (1, 1000),
-    'measure.ground_contact': (0.0, 10.0),
-    'measure.extent_trim': (0.0, 0.25),
-    'auto_trigger_keyframes': (0, 100000),
-    'coverage_full_parallax': (0.1, 1000.0),
-    'display_max_faces': (1000, 100_000_000),
-}
+        A string setting takes the text as it is; the others read it as a YAML scalar (``true``,
+        ``8``, ``.nan``), a float also as Python writes it (``1e-3``, ``nan``, ``inf``).
+
+        Raises:
+            StockpileError: As :meth:`check`.
+
+        """
+        if isinstance(self.default, str):
+            return self.check(text)
+        value: Any
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            value = text
+        if isinstance(self.default, float) and isinstance(value, str):
+            with contextlib.suppress(ValueError):
+                value = float(value)
+        return self.check(value)
+
 
 # Fields a parameter would make no sense for: chosen by the caller or not a scalar.
 _SKIP = {'recon.topic', 'recon.selector', 'recon.sfm', 'recon.dense', 'recon.poisson'}
+
+# Strings whose content is checked beyond their type when they are loaded.
+_TEXT_CHECKS: dict[str, Callable[[str], object]] = {'recon.target': TargetSpec.parse}
 
 
 def _attribute_docs(cls: type) -> dict[str, str]:
@@ -192,7 +193,7 @@ def _attribute_docs(cls: type) -> dict[str, str]:
 
 def _from_dataclass(group: str, cls: type, nodes: tuple[str, ...]) -> list[Setting]:
     docs = _attribute_docs(cls)
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)
     default_obj = cls()
     out = []
     for fld in dataclasses.fields(cls):
@@ -204,11 +205,17 @@ def _from_dataclass(group: str, cls: type, nodes: tuple[str, ...]) -> list[Setti
             value = ''
         if not isinstance(value, (bool, int, float, str)):
             continue
-        choices = tuple(typing.get_args(hints[fld.name]))
-        if not all(isinstance(c, str) for c in choices):
-            choices = ()
-        low, high = _RANGES.get(name, (None, None))
-        out.append(Setting(name, value, docs.get(fld.name, ''), nodes, low, high, choices))
+        hint = hints[fld.name]
+        low = high = None
+        if typing.get_origin(hint) is Annotated:
+            hint, *marks = typing.get_args(hint)
+            for mark in marks:
+                if isinstance(mark, Range):
+                    low, high = mark.low, mark.high
+        choices = typing.get_args(hint) if typing.get_origin(hint) is Literal else ()
+        out.append(Setting(name, value, docs.get(fld.name, ''), nodes, low, high,
+                           tuple(str(c) for c in choices),
+                           parse_text=_TEXT_CHECKS.get(name)))  # fmt: skip
     return out
 
 
@@ -222,14 +229,12 @@ def _table() -> tuple[Setting, ...]:
         Setting('compressed', True, 'Subscribe to <image>/compressed (sensor_msgs/'
                 'CompressedImage) instead of the raw image', kf, read_only=True),
         Setting('coverage_full_parallax', 6.0, 'Without odometry, coverage is the summed '
-                'parallax of the keyframes (in image widths) over this value', kf,
-                *_RANGES['coverage_full_parallax']),
+                'parallax of the keyframes (in image widths) over this value', kf, 0.1, 1000.0),
         Setting('auto_trigger_keyframes', 0, 'Reconstruct on its own once this many keyframes '
-                'are held (0: only on the service or trigger topic)', rc,
-                *_RANGES['auto_trigger_keyframes']),
+                'are held (0: only on the service or trigger topic)', rc, 0, 100000),
         Setting('display_max_faces', 200000, 'Meshes with more faces are decimated for the '
                 'mesh and rock markers (the result folder keeps the full mesh)', rc + sg,
-                *_RANGES['display_max_faces']),
+                1000, 100_000_000),
         Setting('gradation.spec_class', '', 'Riprap class to check the gradation against, '
                 "from the class table ('' checks nothing)", sg),
         Setting('gradation.class_table', '', "Class table YAML ('' uses "
@@ -251,6 +256,40 @@ SETTINGS: tuple[Setting, ...] = _table()
 _BY_NAME = {s.name: s for s in SETTINGS}
 
 
+def get_setting(name: str) -> Setting:
+    """Return the parameter called ``name``.
+
+    Raises:
+        StockpileError: No parameter has that name (the message suggests close ones).
+
+    """
+    setting = _BY_NAME.get(name)
+    if setting is None:
+        close = difflib.get_close_matches(name, _BY_NAME, n=3)
+        hint = f' (did you mean {", ".join(close)}?)' if close else ''
+        raise StockpileError(f'unknown parameter {name!r}{hint}')
+    return setting
+
+
+def check_value(name: str, value: object) -> Value:
+    """Check one parameter value, as on load and on every change of a node's parameter.
+
+    Args:
+        name: Dotted parameter name, e.g. ``segment.threshold``.
+        value: The new value (YAML or ROS parameter types; an int is taken for a float).
+
+    Returns:
+        The value converted to the parameter's type.
+
+    Raises:
+        StockpileError: Unknown name, wrong type, NaN or infinite, outside the range, not one of
+            the choices, or a target spec that does not parse. The message names the parameter,
+            the value and what is allowed.
+
+    """
+    return get_setting(name).check(value)
+
+
 def settings_for(node: str) -> list[Setting]:
     """Return the parameters component ``node`` (one of :data:`NODES`) declares."""
     if node not in NODES:
@@ -268,7 +307,9 @@ class Settings:
     """The option objects built from parameter values.
 
     Attributes:
-        values: Every parameter's value by name (defaults filled in).
+        values: Every parameter's effective value by name: defaults filled in, and the
+            ``segment`` values as the preset of ``segment.mode`` and the explicit ones give them.
+        explicit: Names of the parameters that were set explicitly.
         recon: Options of the reconstruction stages (keyframe selection included).
         segment: Segmentation parameters.
         measure: Measurement parameters.
@@ -280,6 +321,7 @@ class Settings:
     """
 
     values: dict[str, Value]
+    explicit: frozenset[str]
     recon: ReconOptions
     segment: SegmentParams
     measure: MeasureParams
@@ -294,28 +336,37 @@ def _group(values: Mapping[str, Value], group: str) -> dict[str, Value]:
     return {k[len(prefix) :]: v for k, v in values.items() if k.startswith(prefix)}
 
 
-def build_settings(overrides: Mapping[str, Any] | None = None) -> Settings:
+def build_settings(
+    overrides: Mapping[str, Any] | None = None, *, explicit: Iterable[str] | None = None
+) -> Settings:
     """Check parameter values and build the option objects from them.
 
-    ``segment.mode`` picks the preset (``paper`` or ``default``); the other ``segment.*`` values
-    replace the preset's only where they differ from the table default, so that ``mode: paper``
-    alone gives the published rule.
+    ``segment.mode`` picks the preset (``paper`` or ``default``); the ``segment`` values set
+    explicitly replace the preset's, whatever they are (0.93 with ``mode: paper`` is 0.93), and
+    the others come from the preset, so that ``mode: paper`` alone gives the published rule.
 
     Args:
         overrides: Values by dotted name; missing ones take their default.
+        explicit: The names among ``overrides`` that were set explicitly, when ``overrides``
+            also holds values that are only defaults (a node passes every declared parameter);
+            None: every name in ``overrides``.
 
     Raises:
-        StockpileError: Unknown name, wrong type, value out of range, or bad target text.
+        StockpileError: Unknown name, wrong type, value not finite, out of range or not one of
+            the choices, a target spec that does not parse, or a riprap class the class table
+            does not have.
+        ValueError: ``explicit`` names a parameter that ``overrides`` has no value for.
 
     """
+    given = dict(overrides or {})
+    named = frozenset(given if explicit is None else explicit)
+    if not named <= given.keys():
+        raise ValueError(
+            f'explicit names without a value: {", ".join(sorted(named - given.keys()))}'
+        )
     values = defaults()
-    for name, value in (overrides or {}).items():
-        setting = _BY_NAME.get(name)
-        if setting is None:
-            close = difflib.get_close_matches(name, _BY_NAME, n=3)
-            hint = f' (did you mean {", ".join(close)}?)' if close else ''
-            raise StockpileError(f'unknown parameter {name!r}{hint}')
-        values[name] = setting.check(value)
+    for name, value in given.items():
+        values[name] = check_value(name, value)
     recon = _group(values, 'recon')
     target_text = str(recon.pop('target'))
     options = ReconOptions(
@@ -327,19 +378,30 @@ def build_settings(overrides: Mapping[str, Any] | None = None) -> Settings:
         **recon,  # type: ignore[arg-type]
     )
     seg_values = _group(values, 'segment')
-    mode = str(seg_values.pop('mode'))
-    changed = {k: v for k, v in seg_values.items() if v != _BY_NAME[f'segment.{k}'].default}
-    segment = replace(SegmentParams.preset(mode), **changed)  # type: ignore[arg-type]
+    mode = seg_values.pop('mode')
+    chosen = {k: v for k, v in seg_values.items() if f'segment.{k}' in named}
+    segment = SegmentParams.preset(mode, **chosen)  # type: ignore[arg-type]
+    values.update({f'segment.{k}': getattr(segment, k) for k in seg_values})
     table = str(values['gradation.class_table'])
+    class_table = Path(table) if table else None
+    spec_class = str(values['gradation.spec_class'])
+    if spec_class:
+        known = load_class_table(class_table)['classes']
+        if spec_class not in known:
+            raise StockpileError(
+                f'parameter gradation.spec_class: {spec_class!r} is not one of '
+                f'{", ".join(known)} (the classes of {table or "config/riprap_classes.yaml"})'
+            )
     return Settings(
         values=values,
+        explicit=named,
         recon=options,
         segment=segment,
         measure=MeasureParams(**_group(values, 'measure')),  # type: ignore[arg-type]
         work_dir=Path(str(values['work_dir'])),
         frame_id=str(values['frame_id']),
-        spec_class=str(values['gradation.spec_class']),
-        class_table=Path(table) if table else None,
+        spec_class=spec_class,
+        class_table=class_table,
     )
 
 
@@ -401,17 +463,17 @@ def _yaml_value(value: Value) -> str:
     return text.removesuffix('\n...').strip()
 
 
-def render_params_yaml() -> str:
-    """Render every parameter, with its default and description, as a ROS 2 parameters file.
+_CONFIG_HEADER = (
+    '# Parameters of the stockpile_ros nodes (ros2 launch stockpile_ros stockpile.launch.py',
+    '# params_file:=...) and of `stockpile reconstruct|segment|replay --params`. Generated from',
+    '# the table in stockpile_ros/settings.py (render_params_yaml); values are checked on load.',
+)
 
-    Parameters declared by more than one component go under ``/**``; the others under the one
-    node that declares them (nested by group). This is how ``config/stockpile.yaml`` is written.
-    """
-    lines = [
-        '# Parameters of the stockpile_ros nodes (ros2 launch stockpile_ros stockpile.launch.py',
-        '# params_file:=...) and of `stockpile replay --params`. Generated from the table in',
-        '# stockpile_ros/settings.py (render_params_yaml); ranges are checked on load.',
-    ]
+
+def _render(values: Mapping[str, Value], explicit: Iterable[str], header: Iterable[str]) -> str:
+    """Render ``values`` as a ROS 2 parameters file with the descriptions as comments."""
+    marked = set(explicit)
+    lines = list(header)
     sections: list[tuple[str, list[Setting]]] = [('/**', [s for s in SETTINGS if len(s.nodes) > 1])]
     for node, name in zip(NODES, NODE_NAMES, strict=True):
         sections.append((name, [s for s in SETTINGS if s.nodes == (node,)]))
@@ -432,5 +494,60 @@ def render_params_yaml() -> str:
                 note += f' ({" | ".join(row.choices)})'
             lines += textwrap.wrap(note, 100, initial_indent=f'{indent}# ',
                                    subsequent_indent=f'{indent}#   ')  # fmt: skip
-            lines.append(f'{indent}{leaf}: {_yaml_value(row.default)}')
+            mark = '  # set explicitly' if row.name in marked else ''
+            lines.append(f'{indent}{leaf}: {_yaml_value(values[row.name])}{mark}')
     return '\n'.join(lines) + '\n'
+
+
+def render_params_yaml() -> str:
+    """Render every parameter, with its default and description, as a ROS 2 parameters file.
+
+    Parameters declared by more than one component go under ``/**``; the others under the one
+    node that declares them (nested by group). This is how ``config/stockpile.yaml`` is written.
+    """
+    return _render(defaults(), (), _CONFIG_HEADER)
+
+
+def write_effective(settings: Settings | Mapping[str, Any], folder: str | Path) -> Path:
+    """Write the parameters a run uses into ``folder`` as :data:`EFFECTIVE_PARAMS`.
+
+    The file is a ROS 2 parameters file like ``config/stockpile.yaml`` (``--params`` or a launch
+    ``params_file`` reads it back to the same options), holding every parameter's effective value;
+    the line of each one set explicitly ends in ``# set explicitly`` and the header lists them. It
+    is written beside and renamed into place, so a reader never sees half of it.
+
+    Args:
+        settings: The settings of the run, or parameter values to build them from (every one of
+            them explicit).
+        folder: Work or result folder (created when missing).
+
+    Returns:
+        The path written.
+
+    Raises:
+        StockpileError: The values do not check (see :func:`build_settings`), or the file cannot
+            be written (the message names the path and the fault).
+
+    """
+    built = settings if isinstance(settings, Settings) else build_settings(settings)
+    # Callers point a run at another folder with dataclasses.replace(settings, work_dir=...)
+    # (the replay, the segmentation node): the field is what the run uses, not values.
+    values = {**built.values, 'work_dir': str(built.work_dir)}
+    explicit = sorted(built.explicit)
+    header = [
+        '# Effective parameters of a stockpile_ros run (docs/formats.md): every value it used, in',
+        '# the format of config/stockpile.yaml; pass this file to --params to run it again.',
+        *textwrap.wrap(
+            'Set explicitly: ' + (', '.join(explicit) or 'none (every value is the default)'),
+            100, initial_indent='# ', subsequent_indent='#   ',
+        ),
+    ]  # fmt: skip
+    path = Path(folder) / EFFECTIVE_PARAMS
+    partial = path.with_name(path.name + '.partial')
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial.write_text(_render(values, explicit, header))
+        partial.replace(path)
+    except OSError as exc:
+        raise StockpileError(f'cannot write {path}: {exc.strerror or exc}') from exc
+    return path

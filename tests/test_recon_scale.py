@@ -90,6 +90,29 @@ def test_target_spec_parse() -> None:
             TargetSpec.parse(bad)
 
 
+@pytest.mark.parametrize(
+    ('text', 'reason'),
+    [
+        # Each of these parsed before and failed only in the scale stage, after SfM and dense.
+        ('charuco:1x1:0.08:0.06', 'at least 2 x 2'),
+        ('charuco:5x0:0.08:0.06', 'at least 2 x 2'),
+        ('charuco:5x4:inf:0.06', 'finite'),
+        ('charuco:5x4:0.08:0.06:CharucoBoard', 'unknown ArUco dictionary CharucoBoard'),
+        ('charuco:20x20:0.08:0.06:DICT_4X4_50', '200 markers, DICT_4X4_50 only 50'),
+    ],
+)
+def test_target_specs_opencv_cannot_build_are_refused_when_parsed(text: str, reason: str) -> None:
+    with pytest.raises(StockpileError, match=reason):
+        TargetSpec.parse(text)
+
+
+def test_every_parsed_target_spec_builds_its_board() -> None:
+    for text in ('charuco:2x2:0.08:0.06', 'charuco:10x10:0.08:0.06:DICT_4X4_50',
+                 'charuco:5x4:0.08:0.06:DICT_ARUCO_ORIGINAL'):  # fmt: skip
+        spec = TargetSpec.parse(text)
+        assert len(spec.corners()) == (spec.squares_x - 1) * (spec.squares_y - 1)
+
+
 def _rotation(rng: np.random.Generator) -> np.ndarray:
     q, r = np.linalg.qr(rng.normal(size=(3, 3)))
     q *= np.sign(np.diag(r))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
 
 import pytest
@@ -9,14 +11,18 @@ import pytest
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.recon.sfm import SfmOptions
 from stockpile_ros.settings import (
+    EFFECTIVE_PARAMS,
     NODES,
     SETTINGS,
     build_settings,
+    check_value,
     defaults,
     flatten,
+    get_setting,
     load_params_yaml,
     render_params_yaml,
     settings_for,
+    write_effective,
 )
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'stockpile.yaml'
@@ -32,7 +38,12 @@ def test_every_number_has_a_range_holding_its_default_and_every_setting_a_descri
     # The docstring parser keeps continuation lines.
     by_name = {s.name: s for s in SETTINGS}
     assert 'whatever the displacement' in by_name['selector.min_tracked'].description
-    assert by_name['sfm.matcher'].choices == ()
+    # Choices come from the Literal type of the dataclass field.
+    assert by_name['sfm.matcher'].choices == ('sequential', 'exhaustive')
+    assert by_name['sfm.mapper'].choices == ('incremental', 'global')
+    assert by_name['measure.completion'].choices == ('auto', 'mirror', 'ground', 'hull')
+    # Ranges come from the Range marker next to the field.
+    assert (by_name['sfm.overlap'].low, by_name['sfm.overlap'].high) == (1, 1000)
     assert by_name['segment.seed_order'].choices == ('index', 'convex')
 
 
@@ -126,3 +137,103 @@ def test_rendered_yaml_loads_back_to_the_defaults(tmp_path: Path) -> None:
     path = tmp_path / 'p.yaml'
     path.write_text(render_params_yaml())
     assert load_params_yaml(path) == defaults()
+
+
+def test_config_file_is_the_rendered_table() -> None:
+    # Regenerate after changing a field: .venv/bin/python -c "from stockpile_ros.settings import
+    # render_params_yaml as r; print(r(), end='')" > config/stockpile.yaml
+    assert CONFIG.read_text() == render_params_yaml()
+
+
+def test_an_explicit_segment_value_wins_over_the_preset_even_when_it_is_the_default() -> None:
+    s = build_settings({'segment.mode': 'paper', 'segment.threshold': 0.93})
+    assert s.segment.threshold == 0.93
+    # The rest of the paper preset still applies, and values hold what the run uses.
+    assert s.segment.exclude_ground is False and s.values['segment.exclude_ground'] is False
+    assert s.explicit == {'segment.mode', 'segment.threshold'}
+    # A caller passing every value (a node) names the explicit ones.
+    every = {**defaults(), 'segment.mode': 'paper'}
+    assert build_settings(every, explicit=['segment.mode']).segment.threshold == 0.7
+    assert build_settings(every).segment.threshold == 0.93
+    with pytest.raises(ValueError, match=r'segment\.threshold'):
+        build_settings({'segment.mode': 'paper'}, explicit=['segment.threshold'])
+
+
+@pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf])
+def test_every_float_setting_refuses_nan_and_infinity(bad: float) -> None:
+    floats = [s for s in SETTINGS if isinstance(s.default, float)]
+    assert len(floats) > 20
+    for s in floats:
+        with pytest.raises(StockpileError, match=rf'parameter {s.name}: .* not a finite number'):
+            check_value(s.name, bad)
+        with pytest.raises(StockpileError, match='not a finite number'):
+            build_settings({s.name: bad})
+
+
+def test_check_value_names_the_parameter_the_value_and_what_is_allowed() -> None:
+    with pytest.raises(StockpileError) as info:
+        check_value('sfm.matcher', 'bogus')
+    assert str(info.value) == "parameter sfm.matcher: 'bogus' is not one of sequential, exhaustive"
+    with pytest.raises(StockpileError, match=r'selector.blur_ratio: 1.5 is outside \[0, 1\]'):
+        check_value('selector.blur_ratio', 1.5)
+    with pytest.raises(StockpileError, match=r'recon\.target: .*at least 2 x 2 squares'):
+        check_value('recon.target', 'charuco:1x1:0.08:0.06')
+    with pytest.raises(StockpileError, match=r"unknown parameter 'sfm\.matcherr'"):
+        check_value('sfm.matcherr', 'exhaustive')
+    assert check_value('measure.specific_gravity', 3) == 3.0
+    assert check_value('recon.target', '') == ''
+
+
+def test_command_line_text_is_read_as_the_setting_type() -> None:
+    assert get_setting('segment.threshold').parse('1e-1') == 0.1
+    assert get_setting('sfm.use_camera_info').parse('false') is False
+    assert get_setting('sfm.overlap').parse('12') == 12
+    # A string setting keeps the text: YAML would read 1:20 as the base-60 number 80.
+    assert get_setting('sfm.vocab_tree').parse('1:20') == '1:20'
+    for text in ('.nan', 'nan', 'inf', '-.inf'):
+        with pytest.raises(StockpileError, match='not a finite number'):
+            get_setting('segment.threshold').parse(text)
+    with pytest.raises(StockpileError, match='expected int'):
+        get_setting('sfm.overlap').parse('many')
+
+
+def test_an_unknown_riprap_class_is_refused_on_load() -> None:
+    with pytest.raises(StockpileError, match=r"gradation\.spec_class: 'XI' is not one of I, II"):
+        build_settings({'gradation.spec_class': 'XI'})
+    assert build_settings({'gradation.spec_class': 'III'}).spec_class == 'III'
+
+
+def test_effective_parameters_load_back_to_the_same_options(tmp_path: Path) -> None:
+    given = {'segment.mode': 'paper', 'segment.threshold': 0.93, 'sfm.matcher': 'exhaustive',
+             'recon.target': 'charuco:5x4:0.08:0.06:DICT_4X4_50'}  # fmt: skip
+    settings = build_settings(given)
+    path = write_effective(settings, tmp_path / 'work')
+    assert path == tmp_path / 'work' / EFFECTIVE_PARAMS
+    text = path.read_text()
+    marked = {line.split(':')[0].strip() for line in text.splitlines()
+              if line.endswith('  # set explicitly')}  # fmt: skip
+    assert marked == {'mode', 'threshold', 'matcher', 'target'}
+    assert '# Set explicitly: recon.target, segment.mode, segment.threshold, sfm.matcher' in text
+    again = build_settings(load_params_yaml(path))
+    assert (again.recon, again.segment, again.measure) == (
+        settings.recon,
+        settings.segment,
+        settings.measure,
+    )
+    # The preset's values are written as used: paper leaves the ground in the search.
+    assert load_params_yaml(path)['segment.exclude_ground'] is False
+    # A moved work folder is what the file records.
+    moved = dataclasses.replace(settings, work_dir=tmp_path / 'elsewhere')
+    assert load_params_yaml(write_effective(moved, tmp_path))['work_dir'] == str(
+        tmp_path / 'elsewhere'
+    )
+    assert not list(tmp_path.glob('*.partial'))
+
+
+def test_effective_parameters_from_values_and_a_folder_that_cannot_be_made(tmp_path: Path) -> None:
+    path = write_effective({'sfm.overlap': 5}, tmp_path)
+    assert load_params_yaml(path)['sfm.overlap'] == 5
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    with pytest.raises(StockpileError, match=f'cannot write {blocker}/params.yaml'):
+        write_effective(build_settings(), blocker)

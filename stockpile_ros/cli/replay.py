@@ -6,11 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-import yaml
-
-from ..errors import StockpileError
 from ..replay import ReplaySummary, replay
-from ..settings import build_settings, load_params_yaml
+from .parameters import add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
@@ -32,23 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add this subcommand's arguments."""
     parser.add_argument('bag', type=Path, help='ROS 2 bag (folder, .mcap or .db3)')
     parser.add_argument('--out', type=Path, required=True, help='output folder')
-    parser.add_argument('--params', type=Path, help='ROS 2 parameters YAML (config/stockpile.yaml)')
-    parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
-                        help='override one parameter (YAML value), repeatable')  # fmt: skip
     parser.add_argument('--topic', help='image topic (default: the one with most messages)')
-
-
-def _overrides(items: list[str]) -> dict[str, object]:
-    out: dict[str, object] = {}
-    for item in items:
-        name, sep, text = item.partition('=')
-        if not sep or not name:
-            raise StockpileError(f'--set {item!r}: expected NAME=VALUE')
-        try:
-            out[name.strip()] = yaml.safe_load(text) if text else ''
-        except yaml.YAMLError as exc:
-            raise StockpileError(f'--set {item!r}: {exc}') from exc
-    return out
+    add_parameter_arguments(parser)
 
 
 def _print_summary(s: ReplaySummary) -> None:
@@ -84,8 +66,6 @@ def _print_summary(s: ReplaySummary) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    values = load_params_yaml(args.params) if args.params is not None else {}
-    values.update(_overrides(args.set))
-    summary = replay(args.bag, args.out, build_settings(values), args.topic)
+    summary = replay(args.bag, args.out, settings_from_args(args), args.topic)
     _print_summary(summary)
     return 0 if summary.ok else 1

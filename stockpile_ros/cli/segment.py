@@ -13,10 +13,10 @@ import numpy as np
 from ..errors import StockpileError
 from ..meshio import LabelledMesh, read_labelled_mesh
 from ..segment.gradation import load_class_table
-from ..segment.measure import MeasureParams
 from ..segment.pipeline import analyse_mesh
 from ..segment.report import write_result_folder
-from ..segment.segmentation import SegmentParams
+from ..settings import write_effective
+from .parameters import Alias, add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
@@ -32,7 +32,22 @@ merges fragments under 1 % of the faces, hands the valley faces back to the rock
 and joins neighbouring regions whose union is convex across their shared border.
 
 Class tables: config/riprap_classes.yaml (NCHRP 568 classes I-X, by mass; the default) and
-config/fp14_riprap_classes.yaml (FHWA FP-14 classes 1-8, by count)."""
+config/fp14_riprap_classes.yaml (FHWA FP-14 classes 1-8, by count).
+
+Parameters are those of the segmentation node (config/stockpile.yaml): --params FILE reads a
+parameters file, --set NAME=VALUE sets one (e.g. --set measure.specific_gravity=2.7 --set
+measure.completion=hull). A segment value set explicitly wins over the preset of the mode. Every
+value is checked before the mesh is read, and the values used are written to OUT/params.yaml."""
+
+# The convenience flags: each sets one table key, and only when it is given.
+_ALIASES = (
+    Alias('--mode', 'segment.mode', 'preset of the segment values not set explicitly'),
+    Alias('--threshold', 'segment.threshold', 't of Eq. 2 (paper 0.7)', metavar='T'),
+    Alias('--spec-class', 'gradation.spec_class', 'riprap class to check, e.g. III',
+          metavar='CLASS'),
+    Alias('--class-table', 'gradation.class_table',
+          'class table YAML (default config/riprap_classes.yaml)', metavar='FILE'),
+)  # fmt: skip
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,16 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--mesh-info', type=Path, help='mesh.json of the reconstruction (scale, keyframes)'
     )
-    parser.add_argument('--mode', choices=('paper', 'default'), default='default')
-    parser.add_argument('--threshold', type=float, help='t of Eq. 2 (paper 0.7)')
-    parser.add_argument('--spec-class', help='riprap class to check, e.g. III')
-    parser.add_argument(
-        '--class-table', type=Path, help='class table YAML (default config/riprap_classes.yaml)'
-    )
-    parser.add_argument('--specific-gravity', type=float, default=2.65)
-    parser.add_argument('--completion', choices=('auto', 'hull', 'mirror', 'ground'),
-                        default='auto', help='rule for the unseen side of each rock (volume, '
-                        'mass): auto mirrors rocks seen as caps, closes others flat')  # fmt: skip
+    add_parameter_arguments(parser, _ALIASES)
 
 
 def _read_mesh(path: Path) -> LabelledMesh:
@@ -90,25 +96,22 @@ def _read_info(path: Path | None) -> dict[str, Any] | None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    settings = settings_from_args(args)
     mesh = _read_mesh(args.mesh)
     info = _read_info(args.mesh_info)
-    spec = None
-    if args.spec_class is not None:
-        table = load_class_table(args.class_table)
-        if args.spec_class not in table['classes']:
-            known = ', '.join(table['classes'])
-            raise StockpileError(f'unknown class {args.spec_class!r}; the table has {known}')
-        spec = table['classes'][args.spec_class]
-    params = SegmentParams.preset(args.mode, threshold=args.threshold)
+    # build_settings has checked that the table holds the class.
+    spec = (
+        load_class_table(settings.class_table)['classes'][settings.spec_class]
+        if settings.spec_class
+        else None
+    )
     analysis = analyse_mesh(
         mesh.vertices, mesh.faces, mesh.colors,
-        seg_params=params,
-        measure_params=MeasureParams(
-            specific_gravity=args.specific_gravity, completion=args.completion
-        ),
+        seg_params=settings.segment, measure_params=settings.measure,
         spec=spec, mesh_info=info, source=str(args.mesh),
     )  # fmt: skip
     write_result_folder(args.out, analysis, spec)
+    write_effective(settings, args.out)
     g = analysis.report['gradation']
     d50 = 'undefined' if g['d50'] is None else f'{g["d50"]:.3f} m'
     print(

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import cv2
 import numpy as np
@@ -27,6 +27,7 @@ import pycolmap
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..progress import progress
+from ..ranges import Range
 from .sfm import SparseModel, View
 
 __all__ = ['DenseOptions', 'DepthView', 'dense_cloud', 'run_dense']
@@ -58,16 +59,16 @@ class DenseOptions:
 
     """
 
-    work_width: int = 1280
-    stride: int = 2
-    pair_window: int = 30
-    partners: int = 1
-    target_baseline: float = 0.25
-    check_window: int = 3
-    min_agree: int = 1
-    depth_tolerance: float = 0.01
-    voxel: float = 0.0
-    block_size: int = 5
+    work_width: Annotated[int, Range(64, 16384)] = 1280
+    stride: Annotated[int, Range(1, 64)] = 2
+    pair_window: Annotated[int, Range(1, 100)] = 30
+    partners: Annotated[int, Range(1, 8)] = 1
+    target_baseline: Annotated[float, Range(0.0, 10.0)] = 0.25
+    check_window: Annotated[int, Range(0, 100)] = 3
+    min_agree: Annotated[int, Range(0, 100)] = 1
+    depth_tolerance: Annotated[float, Range(0.0, 1.0)] = 0.01
+    voxel: Annotated[float, Range(0.0, 1e6)] = 0.0
+    block_size: Annotated[int, Range(1, 31)] = 5
     use_gpu: bool = True
 
 

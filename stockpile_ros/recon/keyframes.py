@@ -12,13 +12,14 @@ import json
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from ..camera import CameraModel, Frame
+from ..ranges import Range
 
 __all__ = [
     'Decision',
@@ -56,15 +57,15 @@ class SelectorOptions:
 
     """
 
-    work_width: int = 320
-    blur_ratio: float = 0.6
-    reference_frames: int = 9
-    min_parallax: float = 0.06
-    min_tracked: float = 0.5
-    min_spacing: int = 2
-    max_spacing: int = 60
-    max_keyframes: int = 80
-    max_corners: int = 100
+    work_width: Annotated[int, Range(32, 4096)] = 320
+    blur_ratio: Annotated[float, Range(0.0, 1.0)] = 0.6
+    reference_frames: Annotated[int, Range(1, 1000)] = 9
+    min_parallax: Annotated[float, Range(0.0, 1.0)] = 0.06
+    min_tracked: Annotated[float, Range(0.0, 1.0)] = 0.5
+    min_spacing: Annotated[int, Range(1, 10000)] = 2
+    max_spacing: Annotated[int, Range(0, 100000)] = 60
+    max_keyframes: Annotated[int, Range(2, 10000)] = 80
+    max_corners: Annotated[int, Range(8, 10000)] = 100
 
 
 @dataclass(frozen=True)

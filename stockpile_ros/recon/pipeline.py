@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +22,7 @@ from ..errors import CaptureError, StockpileError
 from ..geometry import Similarity, umeyama
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
+from ..ranges import Range
 from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
 from .ground import fit_ground, pile_mask, stockpile_transform
@@ -88,8 +89,8 @@ class ReconOptions:
     poisson: PoissonOptions = field(default_factory=PoissonOptions)
     target: TargetSpec | None = None
     use_odometry: bool = True
-    crop_radius: float = 1.5
-    odometry_tolerance: float = 0.05
+    crop_radius: Annotated[float, Range(0.0, 100.0)] = 1.5
+    odometry_tolerance: Annotated[float, Range(0.0, 10.0)] = 0.05
 
 
 @dataclass(frozen=True)

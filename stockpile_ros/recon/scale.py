@@ -9,6 +9,7 @@ points of each fit. Both are combined by inverse-variance weighting of the log s
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -73,10 +74,27 @@ class TargetSpec:
                 f'target {text!r}: expected charuco:SXxSY:SQUARE_M:MARKER_M[:DICTIONARY], '
                 'e.g. charuco:5x4:0.08:0.06:DICT_4X4_50'
             ) from None
-        if not hasattr(cv2.aruco, spec.dictionary):
-            raise StockpileError(f'target {text!r}: unknown ArUco dictionary {spec.dictionary}')
+        # OpenCV builds no board under 2 x 2 squares; it fails inside the scale stage, after SfM
+        # and dense have run, so the spec is refused here.
+        if min(spec.squares_x, spec.squares_y) < 2:
+            raise StockpileError(f'target {text!r}: a ChArUco board has at least 2 x 2 squares')
+        if not all(math.isfinite(v) for v in (spec.square_length, spec.marker_length)):
+            raise StockpileError(f'target {text!r}: the square and marker edges must be finite')
         if not 0 < spec.marker_length < spec.square_length:
             raise StockpileError(f'target {text!r}: the marker must be smaller than the square')
+        code = getattr(cv2.aruco, spec.dictionary, None)
+        if not spec.dictionary.startswith('DICT_') or not isinstance(code, int):
+            raise StockpileError(
+                f'target {text!r}: unknown ArUco dictionary {spec.dictionary} (a DICT_ name of '
+                'cv2.aruco, e.g. DICT_4X4_50 or DICT_5X5_100)'
+            )
+        # Markers with ids past the dictionary's size can never be detected.
+        markers = spec.squares_x * spec.squares_y // 2
+        size = len(cv2.aruco.getPredefinedDictionary(code).bytesList)
+        if markers > size:
+            raise StockpileError(
+                f'target {text!r}: the board has {markers} markers, {spec.dictionary} only {size}'
+            )
         return spec
 
     def board(self) -> cv2.aruco.CharucoBoard:

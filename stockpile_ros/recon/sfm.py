@@ -13,7 +13,7 @@ import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -21,6 +21,7 @@ import pycolmap
 
 from ..camera import CameraModel
 from ..errors import CaptureError
+from ..ranges import Range
 from .keyframes import KeyframeRecord
 
 __all__ = ['SfmOptions', 'SparseModel', 'View', 'load_sparse', 'run_sfm']
@@ -51,18 +52,18 @@ class SfmOptions:
 
     """
 
-    max_image_size: int = 1024
-    max_features: int = 4096
-    matcher: str = 'sequential'
-    overlap: int = 8
+    max_image_size: Annotated[int, Range(64, 16384)] = 1024
+    max_features: Annotated[int, Range(64, 65536)] = 4096
+    matcher: Literal['sequential', 'exhaustive'] = 'sequential'
+    overlap: Annotated[int, Range(1, 1000)] = 8
     vocab_tree: str = ''
-    mapper: str = 'incremental'
-    num_threads: int = 2
-    min_registered_fraction: float = 0.5
-    min_features: int = 150
+    mapper: Literal['incremental', 'global'] = 'incremental'
+    num_threads: Annotated[int, Range(-1, 256)] = 2
+    min_registered_fraction: Annotated[float, Range(0.0, 1.0)] = 0.5
+    min_features: Annotated[int, Range(0, 65536)] = 150
     use_camera_info: bool = True
-    min_triangulation_angle: float = 8.0
-    log_level: int = 1
+    min_triangulation_angle: Annotated[float, Range(0.0, 90.0)] = 8.0
+    log_level: Annotated[int, Range(0, 3)] = 1
 
 
 @dataclass

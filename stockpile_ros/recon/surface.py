@@ -10,11 +10,13 @@ simplified to a face budget.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
+
+from ..ranges import Range
 
 __all__ = ['PoissonOptions', 'poisson_surface']
 
@@ -37,12 +39,12 @@ class PoissonOptions:
 
     """
 
-    depth: int = 9
-    density_quantile: float = 0.02
-    max_distance: float = 4.0
-    margin: float = 0.02
-    target_faces: int = 0
-    threads: int = 1
+    depth: Annotated[int, Range(4, 14)] = 9
+    density_quantile: Annotated[float, Range(0.0, 0.9)] = 0.02
+    max_distance: Annotated[float, Range(0.0, 1000.0)] = 4.0
+    margin: Annotated[float, Range(0.0, 1.0)] = 0.02
+    target_faces: Annotated[int, Range(0, 100_000_000)] = 0
+    threads: Annotated[int, Range(0, 1024)] = 1
 
 
 def poisson_surface(

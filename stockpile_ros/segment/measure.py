@@ -39,12 +39,13 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError
 
+from ..ranges import Range
 from .segmentation import Segmentation
 
 __all__ = [
@@ -93,12 +94,12 @@ class MeasureParams:
 
     """
 
-    specific_gravity: float = 2.65
+    specific_gravity: Annotated[float, Range(0.5, 10.0)] = 2.65
     completion: Completion = 'auto'
-    min_faces: int = 20
-    height_bins: int = 12
-    ground_contact: float = 0.03
-    extent_trim: float = 0.002
+    min_faces: Annotated[int, Range(0, 100_000_000)] = 20
+    height_bins: Annotated[int, Range(1, 1000)] = 12
+    ground_contact: Annotated[float, Range(0.0, 10.0)] = 0.03
+    extent_trim: Annotated[float, Range(0.0, 0.25)] = 0.002
 
 
 @dataclass(frozen=True)

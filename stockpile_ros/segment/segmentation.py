@@ -28,7 +28,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +36,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
+from ..ranges import Range
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .criterion import PAPER_THRESHOLD, edge_scores
 from .region import grow_regions
@@ -64,7 +65,8 @@ class SegmentParams:
     """Every knob of the segmentation. Paper values in brackets.
 
     Attributes:
-        mode: Name of the preset these values came from.
+        mode: Name of the preset these values came from. As a parameter: the preset that gives
+            every other ``segment`` value not set explicitly.
         threshold: ``t`` of Eq. 2 [0.7; the authors' code used 0.81; 0.93 measured best here: on
             four reconstructed piles 0.90 merged touching rocks (recall 0.64 on one), 0.95 began
             to split single rocks].
@@ -113,23 +115,23 @@ class SegmentParams:
     """
 
     mode: Mode = 'default'
-    threshold: float = 0.93
+    threshold: Annotated[float, Range(-1.0, 2.0)] = 0.93
     seed_order: Literal['index', 'convex'] = 'convex'
-    normal_smoothing: int = 0
+    normal_smoothing: Annotated[int, Range(0, 100)] = 0
     exclude_ground: bool = True
-    ground_tolerance: float = 0.01
-    ground_min_nz: float = 0.0
-    min_region_fraction: float = 0.01
-    min_region_faces: int = 30
+    ground_tolerance: Annotated[float, Range(0.0, 10.0)] = 0.01
+    ground_min_nz: Annotated[float, Range(0.0, 1.0)] = 0.0
+    min_region_fraction: Annotated[float, Range(0.0, 1.0)] = 0.01
+    min_region_faces: Annotated[int, Range(0, 100_000_000)] = 30
     merge_fragments: bool = True
     merge_convex: bool = True
-    border_depth: float = 0.12
-    border_min_edges: int = 5
-    valley_depth: float = 0.0005
-    valley_radius: float = 0.0075
-    split_depth: float = 0.001
-    split_radius: float = 0.015
-    split_min_share: float = 0.1
+    border_depth: Annotated[float, Range(0.0, 10.0)] = 0.12
+    border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
+    valley_depth: Annotated[float, Range(0.0, 1.0)] = 0.0005
+    valley_radius: Annotated[float, Range(1e-4, 1.0)] = 0.0075
+    split_depth: Annotated[float, Range(0.0, 1.0)] = 0.001
+    split_radius: Annotated[float, Range(1e-4, 1.0)] = 0.015
+    split_min_share: Annotated[float, Range(0.0, 0.5)] = 0.1
 
     @classmethod
     def paper(cls) -> SegmentParams:
