@@ -25,7 +25,7 @@ from .errors import StockpileError
 from .progress import progress
 from .publish import DIAGNOSTIC_PREFIX, Publication
 from .runner import Outcome
-from .settings import Settings
+from .settings import Settings, write_effective
 
 __all__ = ['ReplaySummary', 'replay']
 
@@ -142,7 +142,9 @@ class _Rig:
             self.summary.result_dir,
         )
         self.summary.outcome = seg
-        self.summary.report = seg.analysis.report if seg.ok and seg.analysis else None
+        if seg.ok and seg.analysis:
+            self.summary.report = seg.analysis.report
+            write_effective(self.settings, self.summary.result_dir)
 
 
 def replay(
@@ -170,6 +172,7 @@ def replay(
         raise StockpileError(f'{output_bag} exists already; choose another --out or remove it')
     out_dir.mkdir(parents=True, exist_ok=True)
     settings = dataclasses.replace(settings, work_dir=out_dir / 'work')
+    write_effective(settings, settings.work_dir)
     summary = ReplaySummary(bag=Path(bag), image_topic='', work_dir=settings.work_dir,
                             result_dir=out_dir / 'result', output_bag=output_bag)  # fmt: skip
     stats = ReadStats()

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 rclpy = pytest.importorskip(
@@ -20,10 +21,13 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from stockpile_ros import messages as m  # noqa: E402
 from stockpile_ros import topics  # noqa: E402
-from stockpile_ros.nodes.common import RclpyFactory  # noqa: E402
+from stockpile_ros.nodes.common import RclpyFactory, qos_profile  # noqa: E402
+from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
+from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
 from stockpile_ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
 from stockpile_ros.settings import settings_for  # noqa: E402
 
@@ -94,3 +98,76 @@ def test_second_trigger_while_busy_is_refused(ros: None, tmp_path: Path) -> None
         executor.shutdown()
         node.destroy_node()
         client_node.destroy_node()
+
+
+@pytest.mark.parametrize(
+    ('name', 'value', 'why'),
+    [
+        ('segment.threshold', float('nan'), 'nan'),
+        ('sfm.matcher', 'bogus', 'one of'),
+        ('sfm.max_features', 10**9, ''),
+        ('recon.target', 'charuco:1x1:0.08:0.06:DICT_4X4_50', 'charuco'),
+        ('measure.specific_gravity', float('inf'), 'inf'),
+    ],
+)
+def test_bad_parameter_values_are_refused_with_a_reason(
+    ros: None, tmp_path: Path, name: str, value: object, why: str
+) -> None:
+    node = ReconstructionNode(parameter_overrides=[Parameter('work_dir', value=str(tmp_path))])
+    if not node.has_parameter(name):
+        node.destroy_node()
+        node = SegmentationNode(parameter_overrides=[Parameter('work_dir', value=str(tmp_path))])
+    try:
+        before = node.get_parameter(name).value
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and result.reason
+        assert why.lower() in result.reason.lower()
+        assert node.get_parameter(name).value == before
+        wrong_type = node.set_parameters([Parameter(name, value=[1, 2])])[0]
+        assert not wrong_type.successful and wrong_type.reason
+        assert node.get_parameter(name).value == before
+    finally:
+        node.destroy_node()
+
+
+def test_bad_frames_give_diagnostics_and_the_node_keeps_running(ros: None, tmp_path: Path) -> None:
+    params = [Parameter('work_dir', value=str(tmp_path)), Parameter('compressed', value=False)]
+    node = KeyframeNode(parameter_overrides=params)
+    probe = rclpy.create_node('stockpile_test_probe')
+    got: dict[str, list[object]] = {'diag': [], 'status': []}
+    entry = topics.topic(topics.DIAGNOSTICS)
+    probe.create_subscription(get_message(entry.msgtype), entry.name,
+                              got['diag'].append, qos_profile('reliable'))  # fmt: skip
+    probe.create_subscription(get_message('stockpile_msgs/msg/PipelineStatus'),
+                              topics.KEYFRAME_STATUS, got['status'].append,
+                              qos_profile('latched'))  # fmt: skip
+    camera = probe.create_publisher(get_message('sensor_msgs/msg/Image'), topics.IMAGE,
+                                    qos_profile('sensor'))  # fmt: skip
+    executor = MultiThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(probe)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    f = RclpyFactory()
+    try:
+        deadline = time.monotonic() + 10
+        while camera.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        bad = m.image(f, np.zeros((8, 8), np.uint8), 1, 'cam')
+        bad.encoding = 'weird16'
+        good = m.image(f, (np.arange(64 * 48 * 3) % 251).astype(np.uint8).reshape(48, 64, 3),
+                       2, 'cam')  # fmt: skip
+        texts: list[str] = []
+        while time.monotonic() < deadline and not (got['status'] and len(texts) >= 2):
+            camera.publish(bad)
+            camera.publish(good)
+            time.sleep(0.1)
+            texts = [st.message for d in list(got['diag']) for st in d.status]
+        assert any('weird16' in t for t in texts), texts
+        assert any('no CameraInfo' in t for t in texts), texts
+        assert got['status'], 'the node stopped after a bad frame'
+    finally:
+        executor.shutdown()
+        spinner.join(5)
+        node.destroy_node()
+        probe.destroy_node()

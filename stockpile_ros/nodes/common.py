@@ -142,10 +142,9 @@ def declare_settings(node: Node, component: str) -> None:
         node.declare_parameter(setting.name, setting.default, _descriptor(setting))
 
     def check(params: list[Parameter]) -> SetParametersResult:
-        values = {s.name: node.get_parameter(s.name).value for s in settings_for(component)}
-        values.update({p.name: p.value for p in params if p.name in values})
+        changed = {p.name: p.value for p in params}
         try:
-            build_settings(values)
+            _build(node, component, changed)
         except StockpileError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -153,11 +152,23 @@ def declare_settings(node: Node, component: str) -> None:
     node.add_on_set_parameters_callback(check)
 
 
+def _build(node: Node, component: str, changed: dict[str, Any]) -> Settings:
+    """Build the settings from the node's values with ``changed`` applied.
+
+    A node cannot tell a value its parameter file gave from a default, so the values that differ
+    from the table's count as set explicitly (they beat the ``segment.mode`` preset), and so do
+    the ones just being set.
+    """
+    table = settings_for(component)
+    values = {s.name: node.get_parameter(s.name).value for s in table}
+    values.update({k: v for k, v in changed.items() if k in values})
+    explicit = {s.name for s in table if values[s.name] != s.default} | changed.keys() & values
+    return build_settings(values, explicit=explicit)
+
+
 def current_settings(node: Node, component: str) -> Settings:
     """Build the option objects from the node's current parameter values."""
-    return build_settings(
-        {s.name: node.get_parameter(s.name).value for s in settings_for(component)}
-    )
+    return _build(node, component, {})
 
 
 def now_ns(node: Node) -> int:

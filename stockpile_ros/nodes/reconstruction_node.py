@@ -29,7 +29,7 @@ KEYFRAME_WAIT_S = 10.0
 
 
 class ReconstructionNode(Node):
-    """Reconstruct the keyframes received on request; one run at a time, callbacks stay responsive."""
+    """Reconstruct the keyframes received, on request; one run at a time, callbacks stay free."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('stockpile_reconstruction', **kwargs)
