@@ -1,7 +1,10 @@
-"""Launch the stockpile_ros node set on the cart, or against `ros2 bag play --clock`.
+"""Launch the stockpile_ros node set on a cart, a base station, or against `ros2 bag play --clock`.
 
 Arguments:
-  composed:          true: the three nodes in one process (one executor); false: three processes.
+  role:              all: every node here; cart: the keyframe node alone (beside the camera);
+                     base: reconstruction and segmentation (a base station that shares nothing
+                     with the cart but DDS: keyframes and results travel as messages).
+  composed:          true: the role's nodes in one process (one executor); false: one process each.
   params_file:       parameters (default: the package's config/stockpile.yaml).
   image_topic:       camera image topic to remap camera/image_raw to.
   camera_info_topic: camera info topic to remap camera/camera_info to.
@@ -13,22 +16,30 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition, UnlessCondition
-from launch.substitutions import LaunchConfiguration
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
 
+# executable, node name, the roles that run it (as stockpile_ros.nodes.rig.ROLES).
 NODES = (
-    ('keyframe_node', 'stockpile_keyframes'),
-    ('reconstruction_node', 'stockpile_reconstruction'),
-    ('segmentation_node', 'stockpile_segmentation'),
+    ('keyframe_node', 'stockpile_keyframes', ('all', 'cart')),
+    ('reconstruction_node', 'stockpile_reconstruction', ('all', 'base')),
+    ('segmentation_node', 'stockpile_segmentation', ('all', 'base')),
 )
+
+
+def _when(composed, roles):
+    """True when the launch's ``composed`` is ``composed`` and its role one of ``roles``."""
+    return IfCondition(PythonExpression([
+        "'", LaunchConfiguration('composed'), f"' == '{composed}' and '",
+        LaunchConfiguration('role'), f"' in {list(roles)!r}",
+    ]))  # fmt: skip
 
 
 def generate_launch_description():
     share = get_package_share_directory('stockpile_ros')
-    composed = LaunchConfiguration('composed')
     params = [
         LaunchConfiguration('params_file'),
         {'use_sim_time': LaunchConfiguration('use_sim_time')},
@@ -40,6 +51,7 @@ def generate_launch_description():
         ('odom', LaunchConfiguration('odom_topic')),
     ]
     actions = [
+        DeclareLaunchArgument('role', default_value='all', choices=['all', 'cart', 'base']),
         DeclareLaunchArgument('composed', default_value='false'),
         DeclareLaunchArgument(
             'params_file', default_value=os.path.join(share, 'config', 'stockpile.yaml')
@@ -51,14 +63,15 @@ def generate_launch_description():
         Node(
             package='stockpile_ros',
             executable='rig',
-            # No name=: in one process it would rename all three nodes alike.
+            # No name=: in one process it would rename all the nodes alike.
+            arguments=['--role', LaunchConfiguration('role')],
             parameters=params,
             remappings=remappings,
             output='screen',
-            condition=IfCondition(composed),
+            condition=_when('true', ('all', 'cart', 'base')),
         ),
     ]
-    for executable, name in NODES:
+    for executable, name, roles in NODES:
         actions.append(
             Node(
                 package='stockpile_ros',
@@ -67,7 +80,7 @@ def generate_launch_description():
                 parameters=params,
                 remappings=remappings,
                 output='screen',
-                condition=UnlessCondition(composed),
+                condition=_when('false', roles),
             )
         )
     return LaunchDescription(actions)

@@ -20,6 +20,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
 
 from .. import topics
 from ..errors import StockpileError
@@ -223,7 +224,7 @@ class Publishers:
             self._logger.warning(text)
 
 
-def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
+def spin(*node_types: Callable[[], Node], args: list[str] | None = None) -> None:
     """Run nodes in one process on a multi-threaded executor until shut down.
 
     Multi-threaded so that a service or a trigger is answered while a worker runs a stage. On
@@ -244,4 +245,4 @@ def spin(*node_types: type[Node], args: list[str] | None = None) -> None:
         for node in nodes:
             getattr(node, 'close', lambda: None)()
             node.destroy_node()
-        rclpy.try_shutdown()
+        try_shutdown()

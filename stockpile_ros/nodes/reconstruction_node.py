@@ -49,7 +49,8 @@ class ReconstructionNode(Node):
         """Start a run in the worker thread unless one is running; return whether and why."""
         if not self.worker.start(self.run, now_ns(self)):
             return False, 'a reconstruction is already running; wait for it to finish'
-        self.get_logger().info(f'reconstruction started ({why})')
+        # Through Node: mypy lets untyped calls into rclpy's own names only.
+        Node.get_logger(self).info(f'reconstruction started ({why})')
         return True, f'reconstruction started ({why})'
 
     def on_service(self, request: Trigger.Request, response: Trigger.Response) -> Any:
@@ -61,7 +62,7 @@ class ReconstructionNode(Node):
         """Trigger topic (recorded triggers replay)."""
         ok, message = self.start('trigger topic')
         if not ok:
-            self.get_logger().warning(f'trigger refused: {message}')
+            Node.get_logger(self).warning(f'trigger refused: {message}')
 
     def on_keyframe(self, msg: Any) -> None:
         """Store the keyframe in this node's work folder."""
