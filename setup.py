@@ -50,6 +50,7 @@ setup(
             'reconstruction_node = stockpile_ros.nodes.reconstruction_node:main',
             'segmentation_node = stockpile_ros.nodes.segmentation_node:main',
             'rig = stockpile_ros.nodes.rig:main',
+            'stockpile-play = stockpile_ros.nodes.player:main',
         ],
     },
 )
