@@ -155,12 +155,13 @@ def test_bad_frames_give_diagnostics_and_the_node_keeps_running(ros: None, tmp_p
             time.sleep(0.05)
         bad = m.image(f, np.zeros((8, 8), np.uint8), 1, 'cam')
         bad.encoding = 'weird16'
-        good = m.image(f, (np.arange(64 * 48 * 3) % 251).astype(np.uint8).reshape(48, 64, 3),
-                       2, 'cam')  # fmt: skip
+        pixels = (np.arange(64 * 48 * 3) % 251).astype(np.uint8).reshape(48, 64, 3)
         texts: list[str] = []
+        stamp = 0
         while time.monotonic() < deadline and not (got['status'] and len(texts) >= 2):
+            stamp += 100_000_000  # frames past the first keyframe's wait for a CameraInfo
             camera.publish(bad)
-            camera.publish(good)
+            camera.publish(m.image(f, pixels, stamp, 'cam'))
             time.sleep(0.1)
             texts = [st.message for d in list(got['diag']) for st in d.status]
         assert any('weird16' in t for t in texts), texts

@@ -1,14 +1,17 @@
 """The keyframe component: camera, camera info, odometry and tf in; keyframes and a status out.
 
 The same object runs inside the keyframe node (rclpy messages) and the replay (rosbags messages).
-A frame the selector keeps waits until odometry has a sample at or after its stamp, so that its
-pose is interpolated between the samples on both sides whatever order the topics arrive in; once
-the frames have moved past it by more than the interpolation gap no later sample can help, and it
-goes out without odometry.
+A frame the selector keeps waits until odometry has a sample at or after its stamp and a
+CameraInfo at or after it has come, so that its pose is interpolated between the samples on both
+sides and its camera is the one of its stamp, whatever order the topics arrive in (live, the
+image often overtakes its CameraInfo). Once the frames have moved past it by more than the
+interpolation gap no later sample can help, and it goes out with what is known.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -68,7 +71,7 @@ class KeyframeComponent:
             float(settings.values['coverage_full_parallax']),
         )
         self.odometry = OdometryBuffer()
-        self.camera: CameraModel | None = None
+        self._cameras: deque[tuple[int, CameraModel]] = deque(maxlen=64)
         self.counts = KeyframeCounts()
         self._pending: list[_Pending] = []
         self._latest_frame_ns = 0
@@ -89,13 +92,13 @@ class KeyframeComponent:
     def on_camera_info(self, msg: Any, log_ns: int) -> list[Publication]:
         """Keep the latest usable camera model."""
         try:
-            self.camera = camera_model_from_msg(msg)
+            camera = camera_model_from_msg(msg)
         except CameraInfoError as exc:
-            self.camera = None
             return self._note('camera_info:bad', 'WARN', f'{exc}; frames are self-calibrated',
                               log_ns)  # fmt: skip
+        self._cameras.append((message_stamp_ns(msg, log_ns), camera))
         self.counts.camera_info += 1
-        return []
+        return self._resolve(final=False)
 
     def on_odometry(self, msg: Any, log_ns: int) -> list[Publication]:
         """Buffer the pose; send the keyframes it completes."""
@@ -119,27 +122,31 @@ class KeyframeComponent:
             reason = str(exc)
             self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1
             return self._note(f'camera:{reason}', 'ERROR', f'frame skipped: {reason}', stamp)
-        out: list[Publication] = []
-        camera = self.camera
-        if camera is None:
-            out += self._note('camera_info:none', 'WARN',
-                              'no CameraInfo for the images: the intrinsics are self-calibrated '
-                              'by Structure-from-Motion', stamp)  # fmt: skip
-        elif not camera.fits(image):
-            out += self._note('camera_info:size', 'WARN',
-                              f'CameraInfo is {camera.width}x{camera.height} but the images are '
-                              f'{image.shape[1]}x{image.shape[0]}: such frames are '
-                              'self-calibrated', stamp)  # fmt: skip
-            camera = None
-        frame = Frame(stamp, image, str(msg.header.frame_id), camera, topics.IMAGE,
+        frame = Frame(stamp, image, str(msg.header.frame_id), None, topics.IMAGE,
                       self.collector.state.frames)  # fmt: skip
         decision = self.collector.select(frame)
         self._latest_frame_ns = max(self._latest_frame_ns, stamp)
         if decision.accepted:
             self._pending.append(_Pending(frame, decision, keyframe_image(msg, image)))
-        out += self._resolve(final=False)
+        out = self._resolve(final=False)
         out.append(keyframe_status(self.f, stamp, self.collector.state))
         return out
+
+    def _camera(self, frame: Frame) -> tuple[CameraModel | None, list[Publication]]:
+        """Return the CameraInfo nearest the frame's stamp if it fits the image, and why not."""
+        if not self._cameras:
+            return None, self._note('camera_info:none', 'WARN',
+                                    'no CameraInfo for the images: the intrinsics are '
+                                    'self-calibrated by Structure-from-Motion',
+                                    frame.stamp_ns)  # fmt: skip
+        _, camera = min(self._cameras, key=lambda c: abs(c[0] - frame.stamp_ns))
+        if camera.fits(frame.image):
+            return camera, []
+        height, width = frame.image.shape[:2]
+        return None, self._note('camera_info:size', 'WARN',
+                                f'CameraInfo is {camera.width}x{camera.height} but the images '
+                                f'are {width}x{height}: such frames are self-calibrated',
+                                frame.stamp_ns)  # fmt: skip
 
     def flush(self, stamp_ns: int) -> list[Publication]:
         """Send every waiting keyframe with the odometry known now, and count the frames skipped.
@@ -157,17 +164,19 @@ class KeyframeComponent:
         return out
 
     def _ready(self, stamp_ns: int) -> bool:
-        if not self.use_odometry or self.odometry.covers(stamp_ns):
-            return True
+        odometry = not self.use_odometry or self.odometry.covers(stamp_ns)
+        camera = any(c[0] >= stamp_ns for c in self._cameras)
         # Past the gap, a later sample could not be interpolated across any more.
-        return self._latest_frame_ns - stamp_ns > self.odometry.max_gap_ns
+        return (odometry and camera) or self._latest_frame_ns - stamp_ns > self.odometry.max_gap_ns
 
     def _resolve(self, final: bool) -> list[Publication]:
         """Store and send the waiting keyframes whose odometry is known, in order."""
         out: list[Publication] = []
         while self._pending and (final or self._ready(self._pending[0].frame.stamp_ns)):
             item = self._pending.pop(0)
-            frame = item.frame
+            camera, notes = self._camera(item.frame)
+            out += notes
+            frame = dataclasses.replace(item.frame, camera=camera)
             odometry = None
             if self.use_odometry:
                 camera_frame = frame.camera.frame_id if frame.camera else frame.frame_id
