@@ -18,21 +18,17 @@ from pathlib import Path
 from typing import Any
 
 from . import topics
-from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
+from .bagdrive import bag_inputs, drive
+from .bagio.reader import BagReader, ReadStats
 from .bagio.writer import BagWriter
 from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
 from .errors import StockpileError
-from .progress import progress
 from .publish import DIAGNOSTIC_PREFIX, Publication
 from .runner import Outcome
 from .settings import Settings, write_effective
 
 __all__ = ['ReplaySummary', 'replay']
 
-_INFO = 'sensor_msgs/msg/CameraInfo'
-_TF = 'tf2_msgs/msg/TFMessage'
-_EMPTY = 'std_msgs/msg/Empty'
-_ODOMETRY = 'nav_msgs/msg/Odometry'
 # Offered as transient local in the output bag, so that `ros2 bag play` republishes them latched.
 _LATCHED_QOS = ('latched', 'tf_static')
 
@@ -177,67 +173,25 @@ def replay(
                             result_dir=out_dir / 'result', output_bag=output_bag)  # fmt: skip
     stats = ReadStats()
     with BagReader(bag) as reader:
-        images = reader.image_topics()
-        if topic is None and not images:
-            raise StockpileError(f'{bag}: no Image or CompressedImage topic to replay')
-        image_topic = topic or images[0]
-        if image_topic not in images:
-            raise StockpileError(
-                f'{image_topic} is not an image topic of {bag} (image topics: '
-                f'{", ".join(images) or "none"})'
-            )
-        summary.image_topic = image_topic
-        info_topic = camera_info_topic_for(image_topic, [t for t, _ in reader.topics_of([_INFO])])
-        odometry = [t for t, _ in reader.topics_of([_ODOMETRY])]
-        tf = [t for t, _ in reader.topics_of([_TF]) if t in (topics.TF, topics.TF_STATIC)]
-        triggers = [
-            t for t, _ in reader.topics_of([_EMPTY]) if t.rstrip('/').endswith(topics.TRIGGER)
-        ]
-        routes = {image_topic: 'image', **{t: t for t in tf}, **{t: 'trigger' for t in triggers}}
-        routes.update({t: 'odometry' for t in odometry[:1]})
-        if info_topic:
-            routes[info_topic] = 'info'
-        counts = reader.reader.topics
-        total = sum(counts[t].msgcount for t in routes if t in counts) or None
+        inputs = bag_inputs(reader, topic)
+        summary.image_topic = inputs.image
         latched = {topics.absolute(t.name) for t in topics.TABLE if t.qos in _LATCHED_QOS}
         with BagWriter(output_bag, latched=latched) as writer:
             rig = _Rig(settings, writer, summary)
-            _stream(reader, rig, stats, routes, total)
+
+            def passthrough(name: str, msg: Any, log_ns: int) -> None:
+                try:
+                    writer.write(name, msg, log_ns)
+                except (KeyError, ValueError, TypeError) as exc:
+                    stats.problems.append(f'{name}: not passed through ({exc})')
+
+            last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
+                            on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
+            if summary.triggers == 0:
+                rig.reconstruct(last_ns)
     kf = rig.keyframes
     summary.frames = kf.collector.state.frames
     summary.skipped = sum(kf.counts.skipped.values()) + stats.total_skipped
     summary.camera_info = kf.counts.camera_info > 0
     summary.problems.extend(stats.problems)
     return summary
-
-
-def _stream(
-    reader: BagReader, rig: _Rig, stats: ReadStats, routes: dict[str, str], total: int | None
-) -> None:
-    """Feed the routed topics to the keyframe component in bag order; reconstruct at triggers."""
-    kf = rig.keyframes
-    last_ns = 0
-    for name, _, log_ns, msg in progress(
-        reader.messages(list(routes), stats=stats), 'replay', total=total, unit='msg'
-    ):
-        last_ns = log_ns
-        route = routes[name]
-        if route == 'trigger':
-            rig.reconstruct(log_ns)
-            continue
-        try:
-            rig.writer.write(name, msg, log_ns)
-        except (KeyError, ValueError, TypeError) as exc:
-            stats.problems.append(f'{name}: not passed through ({exc})')
-        if route == 'image':
-            rig.publish(log_ns, kf.on_image(msg, log_ns))
-        elif route == 'info':
-            rig.publish(log_ns, kf.on_camera_info(msg, log_ns))
-        elif route == 'odometry':
-            rig.publish(log_ns, kf.on_odometry(msg, log_ns))
-        else:
-            rig.publish(log_ns, kf.on_tf(msg, route == topics.TF_STATIC, log_ns))
-    # The end of the recording: nothing more will complete the keyframes still waiting.
-    rig.publish(last_ns, kf.flush(last_ns))
-    if rig.summary.triggers == 0:
-        rig.reconstruct(last_ns)

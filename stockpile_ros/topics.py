@@ -43,7 +43,9 @@ __all__ = [
 Qos = Literal['sensor', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
 """QoS classes (the nodes map each onto an rclpy profile, the replay onto the offered QoS):
 
-- ``sensor``: best effort, keep last 5 (camera, camera info, odometry: a late sample is useless);
+- ``sensor``: best effort, keep last 50 (camera, camera info, odometry: a lost sample is not sent
+  again, so it matches any publisher; the depth lets a busy node catch up on a burst instead of
+  losing frames or odometry samples, which would change the keyframes and their poses);
 - ``reliable``: reliable, volatile, keep last 10 (triggers);
 - ``stream``: reliable, volatile, keep all (keyframes: every one must arrive, none is replayed to
   a late subscriber, which would hold every image in memory);
@@ -54,7 +56,7 @@ Qos = Literal['sensor', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
 """
 
 QOS_DEPTH: dict[Qos, int] = {
-    'sensor': 5,
+    'sensor': 50,
     'reliable': 10,
     'stream': 0,
     'latched': 1,

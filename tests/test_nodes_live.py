@@ -8,11 +8,7 @@ is recorded here and compared with `stockpile replay` of the same bag.
 from __future__ import annotations
 
 import math
-import os
 import signal
-import subprocess
-import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,16 +19,12 @@ import pytest
 rclpy = pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed here')
 pytest.importorskip('stockpile_msgs', reason='the stockpile_msgs interface package is not built')
 
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
-from rclpy.node import Node  # noqa: E402
+from live_graph import OUTPUTS, Recorder, play, rig, spin, trigger, wait  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
 
 from stockpile_ros import topics  # noqa: E402
 from stockpile_ros.bagio.reader import BagReader  # noqa: E402
 from stockpile_ros.cli import main as cli  # noqa: E402
-from stockpile_ros.nodes.common import qos_profile  # noqa: E402
-from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
 from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
@@ -43,34 +35,6 @@ pytestmark = pytest.mark.slow
 
 # One thread for SfM and Poisson: the same model on every run (see recon/sfm.py).
 PARAMS = {'sfm.num_threads': 1}
-DONE, FAILED = 4, 5
-OUTPUTS = [t for t in topics.TABLE if t.publishers]
-
-
-class Recorder(Node):
-    """Every output topic of the node set, subscribed as the table says, in arrival order."""
-
-    def __init__(self, name: str = 'stockpile_test_recorder') -> None:
-        super().__init__(name)
-        self.lock = threading.Lock()
-        self.got: list[tuple[str, Any]] = []
-        for entry in OUTPUTS:
-            self.create_subscription(get_message(entry.msgtype), entry.name,
-                                     self._keep(entry.name), qos_profile(entry.qos))  # fmt: skip
-
-    def _keep(self, name: str) -> Any:
-        def callback(msg: Any) -> None:
-            with self.lock:
-                self.got.append((name, msg))
-
-        return callback
-
-    def on(self, name: str) -> list[Any]:
-        with self.lock:
-            return [msg for n, msg in self.got if n == name]
-
-    def finished(self) -> bool:
-        return any(s.state in (DONE, FAILED) for s in self.on(topics.STATUS))
 
 
 @pytest.fixture(scope='module')
@@ -103,42 +67,6 @@ def ros() -> Iterator[None]:
         rclpy.try_shutdown()
 
 
-def _spin(*nodes: Node) -> tuple[MultiThreadedExecutor, threading.Thread]:
-    executor = MultiThreadedExecutor()
-    for node in nodes:
-        executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    return executor, thread
-
-
-def _play(bag: Path) -> None:
-    """Publish the bag's inputs at real rate from another process, and wait for it to end."""
-    done = subprocess.run([sys.executable, '-m', 'stockpile_ros.nodes.player', str(bag),
-                           '--rate', '1'], capture_output=True, text=True, timeout=120,
-                          env=os.environ.copy())  # fmt: skip
-    assert done.returncode == 0, done.stderr
-
-
-def _trigger(node: Node) -> Any:
-    client = node.create_client(Trigger, topics.RECONSTRUCT_SERVICE)
-    assert client.wait_for_service(timeout_sec=20)
-    future = client.call_async(Trigger.Request())
-    deadline = time.monotonic() + 20
-    while not future.done() and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert future.done(), 'no answer from the reconstruct service'
-    return future.result()
-
-
-def _wait(recorder: Recorder, timeout_s: float = 300.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not recorder.finished() and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert recorder.finished(), 'no DONE or FAILED status'
-    time.sleep(0.5)  # the results published with the last status
-
-
 def _statuses(msgs: list[Any]) -> list[tuple[int, str, str, int]]:
     return [(int(s.state), s.stage, s.message, int(s.keyframes)) for s in msgs]
 
@@ -168,11 +96,11 @@ def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
     nodes = [KeyframeNode(parameter_overrides=work), ReconstructionNode(parameter_overrides=work),
              SegmentationNode(parameter_overrides=work)]  # fmt: skip
     recorder = Recorder()
-    executor, thread = _spin(*nodes, recorder)
+    executor, thread = spin(*nodes, recorder)
     try:
-        _play(bag)
-        assert _trigger(recorder).success
-        _wait(recorder)
+        play(bag)
+        assert trigger(recorder).success
+        wait(recorder)
         for entry in OUTPUTS:  # every output arrived
             assert recorder.on(entry.name), entry.name
         assert _statuses(recorder.on(topics.STATUS)) == _statuses(replayed[topics.STATUS])
@@ -200,24 +128,16 @@ def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
     assert not thread.is_alive()
 
 
-def _rig(role: str, work: Path) -> subprocess.Popen[str]:
-    params = [f'work_dir:={work}', *(f'{k}:={v}' for k, v in PARAMS.items())]
-    args = [sys.executable, '-m', 'stockpile_ros.nodes.rig', '--role', role, '--ros-args']
-    args += [word for param in params for word in ('-p', param)]
-    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=os.environ.copy())  # fmt: skip
-
-
 def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
     ros: None, bag: Path, replayed: dict[str, list[Any]], tmp_path: Path
 ) -> None:
-    cart, base = _rig('cart', tmp_path / 'cart'), _rig('base', tmp_path / 'base')
+    cart, base = rig('cart', tmp_path / 'cart', PARAMS), rig('base', tmp_path / 'base', PARAMS)
     recorder = Recorder()
-    executor, _ = _spin(recorder)
+    executor, _ = spin(recorder)
     try:
-        _play(bag)
-        assert _trigger(recorder).success
-        _wait(recorder)
+        play(bag)
+        assert trigger(recorder).success
+        wait(recorder)
         _same_rocks(recorder.on(topics.ROCKS), replayed[topics.ROCKS])
         _same_d50(recorder.on(topics.GRADATION), replayed[topics.GRADATION])
         # Nothing on a shared disk: the cart holds its capture, the base station the rest.

@@ -164,7 +164,7 @@ def test_qos_profile_follows_the_table() -> None:
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 
     sensor = qos_profile(topics.topic(topics.IMAGE).qos)
-    assert sensor.reliability == ReliabilityPolicy.BEST_EFFORT and sensor.depth == 5
+    assert sensor.reliability == ReliabilityPolicy.BEST_EFFORT and sensor.depth == 50
     trigger = qos_profile(topics.topic(topics.TRIGGER).qos)
     assert trigger.reliability == ReliabilityPolicy.RELIABLE and trigger.depth == 10
     assert trigger.durability == DurabilityPolicy.VOLATILE

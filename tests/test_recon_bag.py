@@ -1,13 +1,14 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from stockpile_ros.recon.keyframes import KeyframeStore, SelectorOptions
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, run_keyframes
+from stockpile_ros.bagdrive import keyframes_from_bag
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.recon.pipeline import WorkFolder
+from stockpile_ros.settings import build_settings
 from stockpile_ros.sim.camera_path import PathConfig
 from stockpile_ros.sim.pile import PileConfig, parse_gradation
 from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
@@ -36,11 +37,12 @@ def test_bag_keyframes_carry_camera_and_odometry_and_resume(tmp_path: Path) -> N
     truth = json.loads((truth_folder(bag) / 'truth.json').read_text())
     true_centres = {c['stamp_ns']: np.asarray(c['position']) for c in truth['cameras']}
     work = WorkFolder(tmp_path / 'work')
-    every = SelectorOptions(min_parallax=0.0, min_spacing=1, max_keyframes=3, blur_ratio=0.0)
-    first = run_keyframes(bag, work, ReconOptions(selector=every))
+    every = {'selector.min_parallax': 0.0, 'selector.min_spacing': 1, 'selector.blur_ratio': 0.0,
+             'work_dir': str(work.root)}  # fmt: skip
+    first = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 3}))
     assert first['keyframes'] == 3
     # A later run (the "restart") continues after the frames already kept.
-    rest = run_keyframes(bag, work, ReconOptions(selector=replace(every, max_keyframes=8)))
+    rest = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 8}))
     assert rest['new'] == 5 and rest['keyframes'] == 8
     records = KeyframeStore(work.keyframes).records
     assert [r.index for r in records] == list(range(8))

@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from ..bagdrive import collect_keyframes
 from ..recon.pipeline import STAGES, reconstruct
 from ..settings import write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
@@ -63,5 +64,6 @@ def run(args: argparse.Namespace) -> int:
     # Written before the stages run, so that a failed run also says what it was asked to do.
     write_effective(settings, settings.work_dir)
     options = replace(settings.recon, topic=args.topic)
-    reconstruct(args.source, settings.work_dir, options, args.stage, report=_summary)
+    reconstruct(args.source, settings.work_dir, options, args.stage, report=_summary,
+                keyframe_stage=collect_keyframes(settings))  # fmt: skip
     return 0

@@ -74,6 +74,10 @@ class KeyframeComponent:
         self._cameras: deque[tuple[int, CameraModel]] = deque(maxlen=64)
         self.counts = KeyframeCounts()
         self._pending: list[_Pending] = []
+        self._seen = 0
+        records = self.collector.store.records
+        # Resumed: frames up to the last one kept are the same recording again.
+        self._resume_after = records[-1].stamp_ns if records else None
         self._latest_frame_ns = 0
         self._noted: set[str] = set()
 
@@ -116,14 +120,17 @@ class KeyframeComponent:
     def on_image(self, msg: Any, log_ns: int) -> list[Publication]:
         """Offer one frame to the selector; return the status and any keyframes completed."""
         stamp = message_stamp_ns(msg, log_ns)
+        index = self._seen
+        self._seen += 1
+        if self._resume_after is not None and stamp <= self._resume_after:
+            return []
         try:
             image = decode_image(msg)
         except ImageError as exc:
             reason = str(exc)
             self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1
             return self._note(f'camera:{reason}', 'ERROR', f'frame skipped: {reason}', stamp)
-        frame = Frame(stamp, image, str(msg.header.frame_id), None, topics.IMAGE,
-                      self.collector.state.frames)  # fmt: skip
+        frame = Frame(stamp, image, str(msg.header.frame_id), None, topics.IMAGE, index)
         decision = self.collector.select(frame)
         self._latest_frame_ns = max(self._latest_frame_ns, stamp)
         if decision.accepted:

@@ -56,7 +56,7 @@ class ReconstructionComponent:
         self.coverage = 0.0
         self._auto_started = False
         self._held = threading.Condition()
-        self._frames = {r.index for r in self.store.records}
+        self._stamps = {r.stamp_ns for r in self.store.records}
 
     @property
     def held(self) -> CollectorState:
@@ -71,10 +71,10 @@ class ReconstructionComponent:
             return [diagnostics(self.f, log_ns, 'keyframes', 'ERROR',
                                 f'keyframe {msg.index} unusable: {exc}')]  # fmt: skip
         with self._held:
-            if received.frame.index not in self._frames:
+            if received.frame.stamp_ns not in self._stamps:
                 self.store.add(received.frame, odometry=received.odometry,
                                reason=received.reason, sharpness=received.sharpness)  # fmt: skip
-                self._frames.add(received.frame.index)
+                self._stamps.add(received.frame.stamp_ns)
             self._held.notify_all()
         return []
 

@@ -162,7 +162,7 @@ class KeyframeCollector:
 class OdometryBuffer:
     """Recent odometry poses of a live stream, interpolated at frame stamps.
 
-    The live counterpart of :class:`~stockpile_ros.recon.sources.OdometryTrack`: a pose is read
+    A pose is read
     between the samples on both sides of the frame's stamp (:meth:`covers` says when the later one
     has arrived), and the camera's pose when ``tree`` (fed from ``/tf_static`` and ``/tf``) links
     the camera's frame to the odometry's moving frame.

@@ -37,7 +37,7 @@ from .scale import (
     scale_from_target,
 )
 from .sfm import SfmOptions, SparseModel, load_sparse, run_sfm
-from .sources import OdometryTrack, iter_frames, source_kind
+from .sources import iter_frames, source_kind
 from .surface import PoissonOptions, poisson_surface
 
 __all__ = [
@@ -131,13 +131,22 @@ class WorkFolder:
 
 
 def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
-    """Select keyframes from ``source`` into ``work.keyframes``, resuming from what is there.
+    """Select keyframes from photos or a video into ``work.keyframes``, resuming from what is there.
+
+    Bags go through the keyframe component instead, as the nodes take them
+    (:func:`stockpile_ros.bagdrive.keyframes_from_bag`).
 
     Returns:
         Counts: frames seen, keyframes kept (in total and by this run), rejections by reason.
 
+    Raises:
+        StockpileError: ``source`` is a bag.
+        CaptureError: No keyframe was kept.
+
     """
     kind = source_kind(source)
+    if kind == 'bag':
+        raise StockpileError(f'{source}: a bag; its keyframes come from stockpile_ros.bagdrive')
     selector_options = options.selector
     if kind == 'photos':
         # Photos were taken on purpose: keep every sharp one.
@@ -145,20 +154,12 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
     collector = KeyframeCollector(work.keyframes, selector_options)
     store = collector.store
     before = len(store.records)
-    odometry: OdometryTrack | None = None
-    odometry_read = False
     seen = 0
     for frame in progress(iter_frames(source, options.topic), 'keyframes', unit='frame'):
         seen += 1
         if frame.index <= store.last_index:
             continue
-        if kind == 'bag' and options.use_odometry and not odometry_read:
-            # Read once, on the first frame handled (after a resume too): its frame names the
-            # camera, whose offset from the base comes from /tf_static and /tf.
-            frame_id = frame.camera.frame_id if frame.camera is not None else frame.frame_id
-            odometry = OdometryTrack.from_bag(source, frame_id)
-            odometry_read = True
-        collector.push(frame, None if odometry is None else odometry.at(frame.stamp_ns))
+        collector.push(frame)
     reasons = collector.state.decisions
     if not store.records:
         raise CaptureError(
@@ -411,6 +412,7 @@ def reconstruct(
     options: ReconOptions,
     stage: str = 'all',
     report: Callable[[str, dict[str, Any], float], None] | None = None,
+    keyframe_stage: Callable[[Path, WorkFolder, ReconOptions], dict[str, Any]] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Run one stage or all of them in order.
 
@@ -420,6 +422,8 @@ def reconstruct(
         options: Tuning.
         stage: One of :data:`STAGES` or ``"all"``.
         report: Called after each stage with its name, result and duration [s].
+        keyframe_stage: Runs the keyframe stage (:func:`run_keyframes` by default; the command
+            line hands bags to the keyframe component, :mod:`stockpile_ros.bagdrive`).
 
     Returns:
         Each stage's result by name.
@@ -434,7 +438,7 @@ def reconstruct(
         if name == 'keyframes':
             if source is None:
                 raise StockpileError('the keyframes stage needs a SOURCE (bag, photos or video)')
-            results[name] = run_keyframes(source, work, options)
+            results[name] = (keyframe_stage or run_keyframes)(source, work, options)
         elif name == 'sfm':
             results[name] = run_sfm_stage(work, options)
         elif name == 'dense':

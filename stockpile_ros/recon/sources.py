@@ -7,17 +7,14 @@ positions with the transforms from ``/tf_static`` and ``/tf`` (a camera on a mov
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 
 from ..camera import Frame
 from ..errors import StockpileError
-from .transforms import PoseSeries, TransformTree, odometry_entry
 
-__all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'OdometryTrack', 'iter_frames', 'source_kind']
+__all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'iter_frames', 'source_kind']
 
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff')
 VIDEO_SUFFIXES = ('.mp4', '.mov', '.avi', '.mkv', '.webm', '.m4v')
@@ -96,49 +93,3 @@ def iter_frames(source: Path, topic: str | None = None) -> Iterator[Frame]:
         yield from _photos(source)
     else:
         yield from _video(source)
-
-
-@dataclass
-class OdometryTrack:
-    """Odometry of a bag, interpolated at keyframe stamps.
-
-    Attributes:
-        poses: The moving frame's poses in the odometry frame.
-        frame_id: Odometry frame.
-        child_frame_id: Moving frame.
-        camera_frame: The camera's optical frame.
-        tree: Transforms from the camera up to the moving frame (static or over time).
-
-    """
-
-    poses: PoseSeries
-    frame_id: str
-    child_frame_id: str
-    camera_frame: str
-    tree: TransformTree
-
-    @classmethod
-    def from_bag(cls, bag: Path, camera_frame: str) -> OdometryTrack | None:
-        """Read odometry (None when the bag has none or fewer than two poses)."""
-        from ..bagio.reader import read_odometry
-
-        poses = read_odometry(bag)
-        if len(poses) < 2:
-            return None
-        base = poses[0].child_frame_id
-        return cls(
-            poses=PoseSeries.build([(p.stamp_ns, p.position, p.orientation_xyzw) for p in poses]),
-            frame_id=poses[0].frame_id,
-            child_frame_id=base,
-            camera_frame=camera_frame,
-            tree=TransformTree.from_bag(bag, skip_child=base),
-        )
-
-    def at(self, stamp_ns: int, max_gap_ns: int = 200_000_000) -> dict[str, Any] | None:
-        """Return the pose at ``stamp_ns`` as a ``keyframes.jsonl`` entry (None outside)."""
-        pose = self.poses.at(stamp_ns, max_gap_ns)
-        if pose is None:
-            return None
-        position, rotation = pose
-        return odometry_entry(self.tree, position, rotation.as_quat(), self.frame_id,
-                              self.child_frame_id, self.camera_frame, stamp_ns)  # fmt: skip

@@ -9,14 +9,11 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
-
-from ..errors import StockpileError
 
 __all__ = ['MAX_GAP_NS', 'PoseSeries', 'TransformTree', 'odometry_entry', 'pose_matrix']
 
@@ -84,20 +81,6 @@ class TransformTree:
         self._samples: dict[str, tuple[str, deque[tuple[int, Any, Any]]]] = {}
         self._series: dict[str, PoseSeries] = {}
         self._history = history
-
-    @classmethod
-    def from_bag(cls, bag: Path, skip_child: str = '') -> TransformTree:
-        """Every ``/tf_static`` and ``/tf`` transform of a bag (topics it lacks are skipped)."""
-        from ..bagio.reader import read_messages
-
-        tree = cls(skip_child, history=0)
-        for topic in ('/tf_static', '/tf'):
-            try:
-                for _, _, log_ns, msg in read_messages(bag, [topic]):
-                    tree.add(msg, static=topic == '/tf_static', log_ns=log_ns)
-            except StockpileError:
-                continue
-        return tree
 
     def add(self, msg: Any, static: bool, log_ns: int) -> None:
         """Take in one ``tf2_msgs/TFMessage``; a zero stamp means ``log_ns`` (when it arrived)."""
