@@ -75,6 +75,7 @@ def _live(bag: Path, work: Path, params: dict[str, Any], split: bool) -> dict[st
         last = max(recorder.times(topics.GRADATION) + recorder.times(topics.STATUS))
         return {
             'keyframes': len(recorder.on(topics.KEYFRAMES)),
+            'collected': recorder.on(topics.KEYFRAME_STATUS)[-1].message,
             'rocks': recorder.on(topics.ROCKS)[-1],
             'gradation': recorder.on(topics.GRADATION)[-1],
             'seconds': last - first,
@@ -109,6 +110,7 @@ def main() -> None:
             print(f'{label} run {i + 1}: {got["keyframes"]} keyframes, {len(live)} rocks, '
                   f'D50 {got["gradation"].d50:.4f} m, max rock difference from replay '
                   f'{diff:.2e} m, first image to last result {got["seconds"]:.1f} s')  # fmt: skip
+            print(f'  keyframe node: {got["collected"]}')
 
 
 if __name__ == '__main__':

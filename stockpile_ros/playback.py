@@ -202,21 +202,7 @@ def _sequence(element: str, bound: int | None, resolve: Resolve, where: str) -> 
             return out
 
         return numeric
-    if element == 'octet':
-
-        def octets(value: Any) -> list[bytes]:
-            raw = bytes(np.ascontiguousarray(value, dtype=np.uint8).reshape(-1))
-            check(len(raw))
-            return [raw[i : i + 1] for i in range(len(raw))]
-
-        return octets
-    one = _element(element, resolve, where)
-
-    def items(value: Any) -> list[Any]:
-        check(len(value))
-        return [one(v) for v in value]
-
-    return items
+    return _one_by_one(element, resolve, where, check)
 
 
 def _fixed_array(element: str, size: int, resolve: Resolve, where: str) -> _Convert:
@@ -236,6 +222,13 @@ def _fixed_array(element: str, size: int, resolve: Resolve, where: str) -> _Conv
             return out
 
         return numeric
+    return _one_by_one(element, resolve, where, check)
+
+
+def _one_by_one(
+    element: str, resolve: Resolve, where: str, check: Callable[[int], None]
+) -> _Convert:
+    """Return the converter of an array of octets, strings or messages (a Python value each)."""
     if element == 'octet':
 
         def octets(value: Any) -> list[bytes]:

@@ -45,7 +45,8 @@ class ReplaySummary:
         keyframes: Keyframes held at the last trigger.
         coverage: Coverage at the last trigger.
         triggers: Pipeline runs (recorded triggers, or 1 for the end of the bag).
-        camera_info: Whether the bag had usable camera info (else intrinsics are self-calibrated).
+        camera_info: Whether keyframes had the intrinsics of a CameraInfo that fits their images
+            (else they are self-calibrated).
         recon: The last reconstruction's outcome.
         outcome: The last run's final outcome (the segmentation's when the reconstruction ended
             well).
@@ -192,6 +193,6 @@ def replay(
     kf = rig.keyframes
     summary.frames = kf.collector.state.frames
     summary.skipped = sum(kf.counts.skipped.values()) + stats.total_skipped
-    summary.camera_info = kf.counts.camera_info > 0
+    summary.camera_info = kf.counts.with_camera > 0
     summary.problems.extend(stats.problems)
     return summary

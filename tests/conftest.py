@@ -9,9 +9,24 @@ each other, and the localhost range keeps every participant off the network.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+
+import pytest
 
 # Overwritten, not defaulted: a developer's own ROS_DOMAIN_ID would put the test nodes on the
 # domain of the robot or the tools they are running.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # 1..101: 0 is everyone's default, and above 101 the DDS ports reach Linux's ephemeral port range.
 os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 101)
+
+
+@pytest.fixture
+def ros() -> Iterator[None]:
+    """An rclpy context for one test (the test module skips itself where rclpy is missing)."""
+    import rclpy
+
+    rclpy.init()
+    try:
+        yield
+    finally:
+        rclpy.try_shutdown()

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import signal
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -56,15 +55,6 @@ def replayed(bag: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, l
         for name, _, _, msg in reader.messages([n for n in names if n in reader.reader.topics]):
             got.setdefault(name, []).append(msg)
     return {t.name: got.get(topics.absolute(t.name), []) for t in OUTPUTS}
-
-
-@pytest.fixture
-def ros() -> Iterator[None]:
-    rclpy.init()
-    try:
-        yield
-    finally:
-        rclpy.try_shutdown()
 
 
 def _statuses(msgs: list[Any]) -> list[tuple[int, str, str, int]]:

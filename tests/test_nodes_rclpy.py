@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -40,15 +39,6 @@ def _call(client: Any, timeout: float = 5.0) -> Any:
         time.sleep(0.02)
     assert future.done(), 'no answer from the service'
     return future.result()
-
-
-@pytest.fixture
-def ros() -> Iterator[None]:
-    rclpy.init()
-    try:
-        yield
-    finally:
-        rclpy.try_shutdown()
 
 
 def test_factory_builds_messages_rclpy_accepts() -> None:

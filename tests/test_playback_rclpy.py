@@ -8,7 +8,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -177,15 +176,6 @@ def test_qos_profile_follows_the_table() -> None:
     assert stream.history == HistoryPolicy.KEEP_ALL
     latched = qos_profile(topics.topic(topics.STATUS).qos)
     assert latched.depth == 1 and latched.durability == DurabilityPolicy.TRANSIENT_LOCAL
-
-
-@pytest.fixture
-def ros() -> Iterator[None]:
-    rclpy.init()
-    try:
-        yield
-    finally:
-        rclpy.try_shutdown()
 
 
 def test_player_publishes_every_message_of_a_bag_into_a_live_node(

@@ -1,10 +1,11 @@
 """The keyframe component: camera, camera info, odometry and tf in; keyframes and a status out.
 
 The same object runs inside the keyframe node (rclpy messages) and the replay (rosbags messages).
-A frame the selector keeps waits until odometry has a sample at or after its stamp and a
-CameraInfo at or after it has come, so that its pose is interpolated between the samples on both
-sides and its camera is the one of its stamp, whatever order the topics arrive in (live, the
-image often overtakes its CameraInfo). Once the frames have moved past it by more than the
+A frame the selector keeps waits until odometry, and the transforms from the odometry's base to
+the camera, have samples on both sides of its stamp, and a CameraInfo at or after it has come, so
+that its pose is interpolated between the samples on both sides and its camera is the one of its
+stamp, whatever order the topics arrive in (live, the image often overtakes its CameraInfo, and
+odometry the /tf of the same instant). Once the frames have moved past it by more than the
 interpolation gap no later sample can help, and it goes out with what is known.
 """
 
@@ -24,6 +25,7 @@ from ..publish import Publication, diagnostics, keyframe_status
 from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.keyframes import Decision
 from ..recon.pipeline import WorkFolder
+from ..recon.transforms import valid_pose
 from ..settings import Settings
 from .handoff import keyframe_image, keyframe_message
 
@@ -38,12 +40,16 @@ class KeyframeCounts:
         camera_info: Usable CameraInfo messages.
         skipped: Frames that could not be decoded, by reason.
         without_odometry: Keyframes sent without an odometry pose although odometry was asked for.
+        with_camera: Keyframes sent with the intrinsics of a CameraInfo.
+        bad_poses: Odometry samples and transforms left out (non-finite, zero quaternion).
 
     """
 
     camera_info: int = 0
     skipped: dict[str, int] = field(default_factory=dict)
     without_odometry: int = 0
+    with_camera: int = 0
+    bad_poses: int = 0
 
 
 @dataclass
@@ -75,6 +81,7 @@ class KeyframeComponent:
         self.counts = KeyframeCounts()
         self._pending: list[_Pending] = []
         self._seen = 0
+        self._size: tuple[int, ...] | None = None
         records = self.collector.store.records
         # Resumed: frames up to the last one kept are the same recording again.
         self._resume_after = records[-1].stamp_ns if records else None
@@ -108,14 +115,26 @@ class KeyframeComponent:
         """Buffer the pose; send the keyframes it completes."""
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
         stamp = message_stamp_ns(msg, log_ns)
+        pose = valid_pose((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+        if pose is None:
+            return self._bad_poses(1, 'odometry', log_ns)
         frames = (str(msg.header.frame_id), str(msg.child_frame_id))
-        self.odometry.push(stamp, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), *frames)
+        self.odometry.push(stamp, *pose, *frames)
         return self._resolve(final=False)
 
     def on_tf(self, msg: Any, static: bool, log_ns: int) -> list[Publication]:
         """Keep the cart's transforms (``/tf_static``: the camera mount; ``/tf``: a moving mast)."""
-        self.odometry.tree.add(msg, static=static, log_ns=log_ns)
-        return []
+        return self._bad_poses(self.odometry.tree.add(msg, static=static, log_ns=log_ns),
+                               'tf', log_ns)  # fmt: skip
+
+    def _bad_poses(self, count: int, what: str, stamp_ns: int) -> list[Publication]:
+        if not count:
+            return []
+        self.counts.bad_poses += count
+        return self._note(f'odometry:{what}', 'WARN',
+                          f'{what}: a pose with a non-finite value or a zero quaternion was left '
+                          'out (the driver has no fix yet?); later ones like it are counted in '
+                          'the summary', stamp_ns)  # fmt: skip
 
     def on_image(self, msg: Any, log_ns: int) -> list[Publication]:
         """Offer one frame to the selector; return the status and any keyframes completed."""
@@ -130,6 +149,16 @@ class KeyframeComponent:
             reason = str(exc)
             self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1
             return self._note(f'camera:{reason}', 'ERROR', f'frame skipped: {reason}', stamp)
+        size = image.shape[:2]
+        if self._size is None:
+            self._size = size
+        elif size != self._size:
+            # One capture, one camera: SfM and the intrinsics assume it.
+            reason = (f'image size changed from {self._size[1]}x{self._size[0]} to '
+                      f'{size[1]}x{size[0]}')  # fmt: skip
+            self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1
+            text = f'frames skipped: {reason} (one capture, one camera)'
+            return self._note(f'camera:{reason}', 'ERROR', text, stamp)
         frame = Frame(stamp, image, str(msg.header.frame_id), None, topics.IMAGE, index)
         decision = self.collector.select(frame)
         self._latest_frame_ns = max(self._latest_frame_ns, stamp)
@@ -170,24 +199,26 @@ class KeyframeComponent:
                                    f'{total} frames skipped: {why}'))  # fmt: skip
         return out
 
-    def _ready(self, stamp_ns: int) -> bool:
-        odometry = not self.use_odometry or self.odometry.covers(stamp_ns)
-        camera = any(c[0] >= stamp_ns for c in self._cameras)
+    def _ready(self, frame: Frame) -> bool:
+        stamp = frame.stamp_ns
+        odometry = not self.use_odometry or self.odometry.covers(stamp, frame.frame_id)
+        camera = any(c[0] >= stamp for c in self._cameras)
         # Past the gap, a later sample could not be interpolated across any more.
-        return (odometry and camera) or self._latest_frame_ns - stamp_ns > self.odometry.max_gap_ns
+        return (odometry and camera) or self._latest_frame_ns - stamp > self.odometry.max_gap_ns
 
     def _resolve(self, final: bool) -> list[Publication]:
         """Store and send the waiting keyframes whose odometry is known, in order."""
         out: list[Publication] = []
-        while self._pending and (final or self._ready(self._pending[0].frame.stamp_ns)):
+        while self._pending and (final or self._ready(self._pending[0].frame)):
             item = self._pending.pop(0)
             camera, notes = self._camera(item.frame)
             out += notes
+            self.counts.with_camera += camera is not None
             frame = dataclasses.replace(item.frame, camera=camera)
             odometry = None
             if self.use_odometry:
-                camera_frame = frame.camera.frame_id if frame.camera else frame.frame_id
-                odometry = self.odometry.at(frame.stamp_ns, camera_frame)
+                # The image's own frame (REP 104: its optical frame), as _ready waited for.
+                odometry = self.odometry.at(frame.stamp_ns, frame.frame_id)
                 if odometry is None:
                     self.counts.without_odometry += 1
             number = len(self.collector.store.records)

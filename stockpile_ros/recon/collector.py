@@ -16,6 +16,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -188,8 +189,8 @@ class OdometryBuffer:
     def push(
         self,
         stamp_ns: int,
-        position: tuple[float, float, float],
-        orientation_xyzw: tuple[float, float, float, float],
+        position: Sequence[float],
+        orientation_xyzw: Sequence[float],
         frame_id: str,
         child_frame_id: str,
     ) -> None:
@@ -199,10 +200,18 @@ class OdometryBuffer:
         self._frames = (frame_id, child_frame_id)
         self._series = None
 
-    def covers(self, stamp_ns: int) -> bool:
-        """Whether a sample at or after ``stamp_ns`` has arrived (so :meth:`at` is final)."""
-        latest = self.latest_ns
-        return latest is not None and latest >= stamp_ns
+    def covers(self, stamp_ns: int, camera_frame: str = '') -> bool:
+        """Whether samples at or before and at or after ``stamp_ns`` have arrived.
+
+        With ``camera_frame``, the transforms from the odometry's moving frame to the camera too
+        (a camera on a moving mast). Then :meth:`at` is final: no sample still to come can change
+        what it returns.
+        """
+        stamps = [s[0] for s in self._poses]
+        if not stamps or not min(stamps) <= stamp_ns <= max(stamps):
+            return False
+        return not camera_frame or self.tree.covers(self._frames[1].lstrip('/'), camera_frame,
+                                                    stamp_ns)  # fmt: skip
 
     def at(self, stamp_ns: int, camera_frame: str = '') -> dict[str, Any] | None:
         """Return the ``keyframes.jsonl`` odometry entry at ``stamp_ns``.

@@ -15,12 +15,33 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
-__all__ = ['MAX_GAP_NS', 'PoseSeries', 'TransformTree', 'odometry_entry', 'pose_matrix']
+__all__ = [
+    'MAX_GAP_NS',
+    'PoseSeries',
+    'TransformTree',
+    'odometry_entry',
+    'pose_matrix',
+    'valid_pose',
+]
 
 F64 = npt.NDArray[np.float64]
 
 #: Largest stamp gap a moving transform is interpolated across [ns].
 MAX_GAP_NS = 200_000_000
+
+
+def valid_pose(position: Any, quat_xyzw: Any) -> tuple[list[float], list[float]] | None:
+    """Return the position and the unit quaternion, or None when they are not a pose.
+
+    A zero (or non-finite) quaternion or a non-finite position comes from a driver that has no
+    fix yet; it is not a rotation and must not reach a fit.
+    """
+    pos = np.asarray(position, dtype=np.float64).reshape(-1)
+    quat = np.asarray(quat_xyzw, dtype=np.float64).reshape(-1)
+    norm = float(np.linalg.norm(quat)) if np.all(np.isfinite(quat)) else 0.0
+    if pos.size != 3 or quat.size != 4 or not np.all(np.isfinite(pos)) or norm < 1e-6:
+        return None
+    return [float(v) for v in pos], [float(v) for v in quat / norm]
 
 
 def pose_matrix(position: Any, quat_xyzw: Any) -> F64:
@@ -82,13 +103,24 @@ class TransformTree:
         self._series: dict[str, PoseSeries] = {}
         self._history = history
 
-    def add(self, msg: Any, static: bool, log_ns: int) -> None:
-        """Take in one ``tf2_msgs/TFMessage``; a zero stamp means ``log_ns`` (when it arrived)."""
+    def add(self, msg: Any, static: bool, log_ns: int) -> int:
+        """Take in one ``tf2_msgs/TFMessage``; a zero stamp means ``log_ns`` (when it arrived).
+
+        Returns:
+            Transforms left out because they are not a pose (a non-finite value or a zero
+            quaternion), which would poison every camera position computed through them.
+
+        """
+        bad = 0
         for tf in msg.transforms:
             child = tf.child_frame_id.lstrip('/')
             parent = tf.header.frame_id.lstrip('/')
             t, q = tf.transform.translation, tf.transform.rotation
-            pos, quat = [t.x, t.y, t.z], [q.x, q.y, q.z, q.w]
+            pose = valid_pose([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
+            if pose is None:
+                bad += 1
+                continue
+            pos, quat = pose
             if static:
                 self.static[child] = (parent, pose_matrix(pos, quat))
             elif child != self.skip_child:
@@ -97,6 +129,7 @@ class TransformTree:
                     self._samples[child] = (parent, deque(maxlen=self._history or None))
                 self._samples[child][1].append((stamp or log_ns, pos, quat))
                 self._series.pop(child, None)
+        return bad
 
     def _moving(self, child: str, stamp_ns: int) -> tuple[str, F64] | None:
         parent, samples = self._samples[child]
@@ -104,6 +137,27 @@ class TransformTree:
             self._series[child] = PoseSeries.build(list(samples))
         pose = self._series[child].at(stamp_ns, MAX_GAP_NS)
         return None if pose is None else (parent, pose_matrix(pose[0], pose[1].as_quat()))
+
+    def covers(self, parent: str, child: str, stamp_ns: int) -> bool:
+        """Whether ``child`` links to ``parent`` with samples on both sides of ``stamp_ns``.
+
+        Then :meth:`chain` at that stamp is final: no transform still to come changes it.
+        """
+        frame = child.lstrip('/')
+        for _ in range(len(self.static) + len(self._samples) + 1):
+            if frame == parent:
+                return True
+            if frame in self.static:
+                frame = self.static[frame][0]
+            elif frame in self._samples:
+                up, samples = self._samples[frame]
+                stamps = [sample[0] for sample in samples]
+                if not min(stamps) <= stamp_ns <= max(stamps):
+                    return False
+                frame = up
+            else:
+                return False
+        return False
 
     def chain(self, parent: str, child: str, stamp_ns: int) -> F64 | None:
         """4x4 transform ``child`` -> ``parent`` at ``stamp_ns``; None when not connected."""
