@@ -67,9 +67,10 @@ in other units (a metre-edged mesh still resolves a boulder of a few metres)."""
 # A face is of zero area when its height is within float64 rounding of nothing, relative to its
 # longest edge: scale-free, so the same faces are dropped whatever the units.
 _ZERO_HEIGHT = 1e-12
-# The extent a unit is judged against when several would make a mesh plausible: piles scanned
-# from a cart are a few metres across.
+# What a unit is judged against when several would make a mesh plausible: piles scanned from a
+# cart are a few metres across, and their Poisson meshes have edges of a few millimetres.
 _TYPICAL_EXTENT_M = 2.0
+_TYPICAL_EDGE_M = 0.005
 
 
 @dataclass
@@ -138,12 +139,19 @@ def _plausible(extent_m: float, edge_m: float) -> bool:
 
 
 def _likely_units(extent_m: float, edge_m: float, metres_per_unit: float) -> str | None:
-    """Return the unit that makes the mesh plausible with an extent nearest a typical pile."""
+    """Return the unit that makes the mesh plausible and nearest a typical pile's mesh."""
     extent, edge = extent_m / metres_per_unit, edge_m / metres_per_unit
     fits = [u for u, s in UNITS.items() if _plausible(extent * s, edge * s)]
     if not fits:
         return None
-    return min(fits, key=lambda u: abs(math.log(extent * UNITS[u] / _TYPICAL_EXTENT_M)))
+
+    def distance(unit: str) -> float:  # in orders of magnitude, extent and edge together
+        scale = UNITS[unit]
+        return abs(math.log(extent * scale / _TYPICAL_EXTENT_M)) + abs(
+            math.log(edge * scale / _TYPICAL_EDGE_M)
+        )
+
+    return min(fits, key=distance)
 
 
 def check_mesh(
