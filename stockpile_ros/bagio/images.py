@@ -178,18 +178,18 @@ def decode_raw(msg: Any, max_pixels: int = DEFAULT_MAX_PIXELS) -> npt.NDArray[An
     data = _as_bytes(msg.data)
     needed = height * step
     shortest = needed - (step - row_bytes)
+    if not shortest <= data.size <= needed:
+        expected = f'{needed}' if shortest == needed else f'{shortest} to {needed}'
+        raise ImageError(
+            f'data holds {data.size} bytes but {width}x{height} {encoding} with step {step} '
+            f'needs {expected}'
+        )
     if step > data.size:
         # Only a single row can omit its padding and still hold its pixels; a step past the end
         # of the data is no row pitch of it.
         raise ImageError(
             f'step {step} is larger than the whole data ({data.size} bytes) of a {width}x{height} '
             f'{encoding} image'
-        )
-    if not shortest <= data.size <= needed:
-        expected = f'{needed}' if shortest == needed else f'{shortest} to {needed}'
-        raise ImageError(
-            f'data holds {data.size} bytes but {width}x{height} {encoding} with step {step} '
-            f'needs {expected}'
         )
     # A strided view reads the rows in place: nothing beyond the pixels themselves is allocated.
     rows = np.lib.stride_tricks.as_strided(
