@@ -36,7 +36,14 @@ setup(
     ],
     extras_require={
         # mcap: an independent reader to check the MCAP files we write (chunks, channel metadata).
-        'test': ['pytest>=7', 'ruff>=0.5', 'mypy>=1.10', 'types-PyYAML', 'mcap>=1.1,<2'],
+        'test': [
+            'pytest>=7',
+            'ruff>=0.5',
+            'mypy>=1.10',
+            'types-PyYAML',
+            'mcap>=1.1,<2',
+            'hypothesis>=6',
+        ],
     },
     zip_safe=True,
     maintainer='stockpile_ros maintainers',

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ['BagError', 'CaptureError', 'StockpileError']
+__all__ = ['BagError', 'CaptureError', 'MeshError', 'StockpileError']
 
 
 class StockpileError(Exception):
@@ -48,3 +48,10 @@ class CaptureError(StockpileError):
         self.reason = reason
         self.advice = advice
         super().__init__(f'{stage}: {reason}. {advice}')
+
+
+class MeshError(StockpileError, ValueError):
+    """A mesh file or mesh that cannot be used; the text names the file and the fault.
+
+    A ``ValueError`` too, so that callers written against the older reader keep catching it.
+    """

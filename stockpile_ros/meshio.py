@@ -6,13 +6,26 @@ optional colours, faces with an ``int rock_id``. MeshLab, CloudCompare and Blend
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ['LabelledMesh', 'read_labelled_mesh', 'write_labelled_mesh']
+from .errors import MeshError
+
+__all__ = [
+    'LabelledMesh',
+    'MeshError',
+    'PlyElement',
+    'PlyHeader',
+    'check_arrays',
+    'check_ply_size',
+    'read_labelled_mesh',
+    'read_ply_header',
+    'write_labelled_mesh',
+]
 
 
 @dataclass
@@ -67,58 +80,246 @@ def write_labelled_mesh(path: str | Path, mesh: LabelledMesh) -> None:
 
 
 _PLY_TYPES = {
-    'char': 'i1', 'uchar': 'u1', 'short': '<i2', 'ushort': '<u2', 'int': '<i4', 'uint': '<u4',
-    'float': '<f4', 'double': '<f8', 'int8': 'i1', 'uint8': 'u1', 'int16': '<i2', 'uint16': '<u2',
-    'int32': '<i4', 'uint32': '<u4', 'float32': '<f4', 'float64': '<f8',
+    'char': 'i1', 'uchar': 'u1', 'short': 'i2', 'ushort': 'u2', 'int': 'i4', 'uint': 'u4',
+    'float': 'f4', 'double': 'f8', 'int8': 'i1', 'uint8': 'u1', 'int16': 'i2', 'uint16': 'u2',
+    'int32': 'i4', 'uint32': 'u4', 'float32': 'f4', 'float64': 'f8',
 }  # fmt: skip
+_PLY_ORDER = {'binary_little_endian': '<', 'binary_big_endian': '>', 'ascii': '='}
+_INDEX_NAMES = ('vertex_indices', 'vertex_index')
+# The shortest text an ASCII value can take: one digit and a separator.
+_ASCII_VALUE_BYTES = 2
+
+
+@dataclass
+class PlyElement:
+    """One ``element`` of a PLY header.
+
+    Attributes:
+        name: Element name (``vertex``, ``face``, ...).
+        count: Number of items the header claims.
+        properties: ``(name, numpy type)`` per scalar property; a vertex-index list appears as
+            its count ``("n", type)`` followed by ``("v", type)`` for three indices.
+
+    """
+
+    name: str
+    count: int
+    properties: list[tuple[str, str]]
+
+
+@dataclass
+class PlyHeader:
+    """A parsed PLY header.
+
+    Attributes:
+        format: ``binary_little_endian``, ``binary_big_endian`` or ``ascii``.
+        elements: The elements in file order.
+        body_offset: Byte offset of the data after ``end_header``.
+
+    """
+
+    format: str
+    elements: list[PlyElement]
+    body_offset: int
+
+    def element(self, name: str) -> PlyElement | None:
+        """Return the element called ``name``, or None."""
+        return next((e for e in self.elements if e.name == name), None)
+
+
+def _header_line(words: list[str], elements: list[PlyElement], where: str) -> None:
+    """Add one ``element`` or ``property`` line to ``elements``."""
+    if words[0] == 'element':
+        if len(words) != 3 or not words[2].isdigit():
+            raise MeshError(f'{where}: expected "element NAME COUNT"')
+        elements.append(PlyElement(words[1], int(words[2]), []))
+        return
+    if not elements:
+        raise MeshError(f'{where}: property before any element')
+    props = elements[-1].properties
+    if len(words) == 5 and words[1] == 'list':
+        if words[2] not in _PLY_TYPES or words[3] not in _PLY_TYPES:
+            raise MeshError(f'{where}: unknown list types {words[2]} {words[3]}')
+        if words[4] not in _INDEX_NAMES:
+            raise MeshError(f'{where}: unsupported list property {words[4]}')
+        props += [('n', _PLY_TYPES[words[2]]), ('v', _PLY_TYPES[words[3]])]
+    elif len(words) == 3 and words[1] in _PLY_TYPES:
+        props.append((words[2], _PLY_TYPES[words[1]]))
+    else:
+        raise MeshError(f'{where}: expected "property TYPE NAME" or a vertex index list')
+
+
+def read_ply_header(raw: bytes, source: str | Path) -> PlyHeader:
+    """Parse and check the header of a PLY file held in ``raw``.
+
+    Every line must be a known keyword with its fields; a blank line, an unknown keyword, a
+    missing ``format`` or a vertex element without x, y, z is refused.
+
+    Args:
+        raw: The file's bytes (at least its header).
+        source: The file, for messages.
+
+    Returns:
+        The header.
+
+    Raises:
+        MeshError: Not a PLY header this module understands; the text names the line.
+
+    """
+    if not raw.startswith(b'ply'):
+        raise MeshError(f'{source}: not a PLY file (no "ply" magic)')
+    match = re.search(rb'^end_header[ \t]*\r?\n', raw, re.MULTILINE)
+    if match is None:
+        raise MeshError(f'{source}: PLY header without "end_header"')
+    try:
+        text = raw[: match.start()].decode('ascii')
+    except UnicodeDecodeError:
+        raise MeshError(f'{source}: PLY header is not ASCII text') from None
+    lines = text.splitlines()
+    fmt: str | None = None
+    elements: list[PlyElement] = []
+    for number, line in enumerate(lines[1:], start=2):
+        where = f'{source}: PLY header line {number}'
+        words = line.split()
+        if not words:
+            raise MeshError(f'{where} is blank')
+        if words[0] in ('comment', 'obj_info'):
+            continue
+        if words[0] == 'format':
+            if len(words) != 3 or words[1] not in _PLY_ORDER or words[2] != '1.0':
+                raise MeshError(f'{where}: unknown format {" ".join(words[1:])!r}')
+            fmt = words[1]
+        elif words[0] in ('element', 'property'):
+            _header_line(words, elements, where)
+        else:
+            raise MeshError(f'{where}: unknown keyword {words[0][:40]!r}')
+    if lines[0].strip() != 'ply' or fmt is None:
+        raise MeshError(f'{source}: PLY header without "ply" and "format" lines')
+    header = PlyHeader(fmt, elements, match.end())
+    vertex = header.element('vertex')
+    if vertex is None or not {'x', 'y', 'z'} <= {p for p, _ in vertex.properties}:
+        raise MeshError(f'{source}: PLY header has no vertex element with x, y and z')
+    return header
+
+
+def check_ply_size(header: PlyHeader, size: int, source: str | Path) -> None:
+    """Refuse a header that claims more items than ``size`` bytes can hold, before any allocation.
+
+    Binary bodies must hold every item in full (triangles: a count and three indices); an ASCII
+    value takes at least two bytes (a digit and a separator).
+
+    Raises:
+        MeshError: The header's counts do not fit in the file.
+
+    """
+    need = 0
+    for element in header.elements:
+        if header.format == 'ascii':
+            values = sum(3 if p == 'v' else 1 for p, _ in element.properties)
+            need += element.count * values * _ASCII_VALUE_BYTES
+        else:
+            need += element.count * _dtype(element, '<').itemsize
+    available = size - header.body_offset
+    if need > available:
+        counts = ', '.join(f'{e.count} {e.name}' for e in header.elements)
+        kind = 'at least ' if header.format == 'ascii' else ''
+        raise MeshError(
+            f'{source}: PLY header claims {counts} ({kind}{need} bytes) but the file holds '
+            f'{available} bytes after the header (truncated, or the counts are wrong)'
+        )
+
+
+def _dtype(element: PlyElement, order: str) -> np.dtype[np.void]:
+    fields: list[tuple[str, str] | tuple[str, str, tuple[int]]] = []
+    for name, kind in element.properties:
+        typ = kind if kind.endswith('1') else order + kind
+        fields.append((name, typ, (3,)) if name == 'v' else (name, typ))
+    try:
+        return np.dtype(fields)
+    except (ValueError, TypeError) as exc:  # duplicate property names
+        raise MeshError(f'PLY element {element.name}: {exc}') from None
+
+
+def check_arrays(
+    vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], source: str | Path
+) -> None:
+    """Refuse a mesh that no reader of it could use.
+
+    That is: no vertices or faces, non-finite vertices, face indices out of range, or faces that
+    are not triangles.
+
+    Raises:
+        MeshError: The first of those faults, with how many items it concerns.
+
+    """
+    if len(vertices) == 0 or len(faces) == 0:
+        raise MeshError(f'{source}: mesh has {len(vertices)} vertices and {len(faces)} faces')
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise MeshError(f'{source}: faces are not triangles (shape {faces.shape})')
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise MeshError(
+            f'{source}: {int(bad.sum())} of {len(vertices)} vertices are not finite '
+            f'(NaN or infinite; first: vertex {first})'
+        )
+    out = (faces < 0) | (faces >= len(vertices))
+    if out.any():
+        face = int(np.flatnonzero(out.any(axis=1))[0])
+        raise MeshError(
+            f'{source}: {int(out.any(axis=1).sum())} faces index vertices outside 0..'
+            f'{len(vertices) - 1} (first: face {face}, {faces[face].tolist()})'
+        )
 
 
 def read_labelled_mesh(path: str | Path) -> LabelledMesh:
-    """Read a binary little-endian PLY written by :func:`write_labelled_mesh`.
+    """Read a binary PLY triangle mesh, such as :func:`write_labelled_mesh` writes.
 
-    Faces without a ``rock_id`` property get label 0.
+    Both byte orders are read; faces without a ``rock_id`` property get label 0. The header is
+    checked against the file's size before anything is allocated, and the arrays with
+    :func:`check_arrays`.
 
     Raises:
-        ValueError: The file is not a binary little-endian triangle PLY.
+        MeshError: Not a binary triangle PLY, a header that does not fit the file, or arrays
+            :func:`check_arrays` refuses; the text names the file and the fault.
+        OSError: The file cannot be read.
 
     """
     raw = Path(path).read_bytes()
-    end = raw.find(b'end_header\n')
-    if not raw.startswith(b'ply') or end < 0:
-        raise ValueError(f'{path}: not a PLY file')
-    header_lines = raw[:end].decode('ascii').splitlines()
-    if 'format binary_little_endian 1.0' not in header_lines:
-        raise ValueError(f'{path}: only binary little-endian PLY is supported')
-    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-    for line in header_lines:
-        words = line.split()
-        if words[0] == 'element':
-            elements.append((words[1], int(words[2]), []))
-        elif words[0] == 'property' and words[1] == 'list':
-            if words[4] != 'vertex_indices' and words[4] != 'vertex_index':
-                raise ValueError(f'{path}: unsupported list property {words[4]}')
-            elements[-1][2].append(('n', _PLY_TYPES[words[2]]))
-            elements[-1][2].append(('v', _PLY_TYPES[words[3]] + ',(3,)'))
-        elif words[0] == 'property':
-            elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
-    offset = end + len(b'end_header\n')
+    header = read_ply_header(raw, path)
+    if header.format == 'ascii':
+        raise MeshError(f'{path}: ASCII PLY; only binary PLY is read here')
+    check_ply_size(header, len(raw), path)
+    if header.element('face') is None:
+        raise MeshError(f'{path}: PLY without a face element')
+    order = _PLY_ORDER[header.format]
+    offset = header.body_offset
     data: dict[str, npt.NDArray[np.void]] = {}
-    for name, count, props in elements:
-        dtype = np.dtype([(p, t.split(',')[0], (3,)) if ',' in t else (p, t) for p, t in props])
-        data[name] = np.frombuffer(raw, dtype=dtype, count=count, offset=offset)
-        offset += dtype.itemsize * count
+    for element in header.elements:
+        dtype = _dtype(element, order)
+        data[element.name] = np.frombuffer(raw, dtype=dtype, count=element.count, offset=offset)
+        offset += dtype.itemsize * element.count
     v, f = data['vertex'], data['face']
-    if np.any(f['n'] != 3):
-        raise ValueError(f'{path}: only triangle faces are supported')
+    fnames = f.dtype.names or ()
+    if 'v' not in fnames:
+        raise MeshError(f'{path}: PLY face element without a vertex index list')
+    sides = np.flatnonzero(f['n'] != 3)
+    if len(sides):
+        raise MeshError(
+            f'{path}: only triangle faces are supported (face {int(sides[0])} has '
+            f'{int(f["n"][sides[0]])} vertices)'
+        )
     names = v.dtype.names or ()
     colors = None
     if {'red', 'green', 'blue'} <= set(names):
         colors = np.stack([v['red'], v['green'], v['blue']], axis=1).astype(np.uint8)
-    fnames = f.dtype.names or ()
     labels = f['rock_id'] if 'rock_id' in fnames else np.zeros(len(f))
+    vertices = np.stack([v['x'], v['y'], v['z']], axis=1).astype(np.float64)
+    faces = np.asarray(f['v'], dtype=np.int64)
+    check_arrays(vertices, faces, path)
     return LabelledMesh(
-        vertices=np.stack([v['x'], v['y'], v['z']], axis=1).astype(np.float64),
-        faces=np.asarray(f['v'], dtype=np.int64),
+        vertices=vertices,
+        faces=faces,
         labels=np.asarray(labels, dtype=np.int32),
         colors=colors,
     )

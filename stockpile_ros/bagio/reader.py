@@ -26,7 +26,7 @@ from rosbags.interfaces import Connection
 from ..camera import CameraModel, Frame
 from ..errors import BagError, StockpileError
 from ..msgs import typestore
-from .images import ImageError, decode_image
+from .images import DEFAULT_MAX_PIXELS, ImageError, decode_image
 
 __all__ = [
     'CAMERA_INFO_TOLERANCE_NS',
@@ -477,7 +477,12 @@ class BagReader:
             yield conn.topic, index, log_ns, msg
 
     def frames_with_messages(
-        self, topic: str | None = None, *, skip_bad: bool = True, stats: ReadStats | None = None
+        self,
+        topic: str | None = None,
+        *,
+        skip_bad: bool = True,
+        stats: ReadStats | None = None,
+        max_pixels: int = DEFAULT_MAX_PIXELS,
     ) -> Iterator[tuple[Frame, Any]]:
         """Like :meth:`frames`, yielding each frame with its deserialised message.
 
@@ -503,7 +508,7 @@ class BagReader:
         def convert(conn: Connection, log_ns: int, msg: Any) -> tuple[Frame, Any]:
             stamp = message_stamp_ns(msg, log_ns)
             frame_id = str(msg.header.frame_id)
-            return Frame(stamp, decode_image(msg), frame_id, topic=conn.topic), msg
+            return Frame(stamp, decode_image(msg, max_pixels), frame_id, topic=conn.topic), msg
 
         for _, index, _, (frame, msg) in _decoded(reader, path, conns, convert, skip_bad, stats):
             frame.index = index
@@ -522,10 +527,18 @@ class BagReader:
             yield frame, msg
 
     def frames(
-        self, topic: str | None = None, *, skip_bad: bool = True, stats: ReadStats | None = None
+        self,
+        topic: str | None = None,
+        *,
+        skip_bad: bool = True,
+        stats: ReadStats | None = None,
+        max_pixels: int = DEFAULT_MAX_PIXELS,
     ) -> Iterator[Frame]:
         """Yield the decoded frames of one image topic; see :func:`read_frames`."""
-        for frame, _ in self.frames_with_messages(topic, skip_bad=skip_bad, stats=stats):
+        items = self.frames_with_messages(
+            topic, skip_bad=skip_bad, stats=stats, max_pixels=max_pixels
+        )
+        for frame, _ in items:
             yield frame
 
     def odometry(
@@ -608,6 +621,7 @@ def read_frames(
     *,
     skip_bad: bool = True,
     stats: ReadStats | None = None,
+    max_pixels: int = DEFAULT_MAX_PIXELS,
 ) -> Iterator[Frame]:
     """Yield the decoded frames of one image topic, each with its matching camera model.
 
@@ -622,6 +636,7 @@ def read_frames(
         topic: Image or CompressedImage topic; None picks the one with most messages.
         skip_bad: Skip (and count in ``stats``) messages that cannot be decoded instead of raising.
         stats: Filled with per-topic counts and problems when given.
+        max_pixels: Largest ``width * height`` decoded; larger images are bad messages.
 
     Raises:
         BagError: (on iteration) the bag cannot be opened, has no such image topic, or
@@ -629,7 +644,7 @@ def read_frames(
 
     """
     with BagReader(bag) as reader:
-        yield from reader.frames(topic, skip_bad=skip_bad, stats=stats)
+        yield from reader.frames(topic, skip_bad=skip_bad, stats=stats, max_pixels=max_pixels)
 
 
 def read_odometry(

@@ -8,13 +8,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..errors import StockpileError
-from ..meshio import LabelledMesh, read_labelled_mesh
+from ..meshcheck import UNITS, MeshCheck, read_mesh
 from ..segment.gradation import load_class_table
 from ..segment.pipeline import analyse_mesh
 from ..segment.report import write_result_folder
+from ..segment.segmentation import SegmentParams
 from ..settings import write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
 
@@ -39,6 +38,10 @@ parameters file, --set NAME=VALUE sets one (e.g. --set measure.specific_gravity=
 measure.completion=hull). A segment value set explicitly wins over the preset of the mode. Every
 value is checked before the mesh is read, and the values used are written to OUT/params.yaml."""
 
+# Largest smoothing radius accepted, in median edge lengths of the mesh (about 2 * 50^2 = 5000
+# smoothing steps; a Poisson mesh at depth 10 of a 1 m pile has radius / edge near 15).
+_MAX_RADIUS_EDGES = 50
+
 # The convenience flags: each sets one table key, and only when it is given.
 _ALIASES = (
     Alias('--mode', 'segment.mode', 'preset of the segment values not set explicitly'),
@@ -57,29 +60,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--mesh-info', type=Path, help='mesh.json of the reconstruction (scale, keyframes)'
     )
+    parser.add_argument(
+        '--units',
+        choices=list(UNITS),
+        help='length unit of the mesh coordinates, scaled to metres (default: metres; a mesh '
+        'whose size is implausible in metres is refused unless its units are given)',
+    )
     add_parameter_arguments(parser, _ALIASES)
 
 
-def _read_mesh(path: Path) -> LabelledMesh:
-    if not path.is_file():
-        raise StockpileError(f'{path}: no such mesh file')
-    try:
-        return read_labelled_mesh(path)
-    except (ValueError, KeyError, UnicodeDecodeError):
-        pass
-    import open3d
+def _smoothing_guard(check: MeshCheck, params: SegmentParams) -> None:
+    """Refuse a mesh far finer than the segmentation's smoothing radii.
 
-    o3d: Any = open3d
-
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    faces = np.asarray(mesh.triangles, dtype=np.int64)
-    if len(faces) == 0:
-        raise StockpileError(f'{path}: not a triangle mesh open3d or stockpile_ros can read')
-    colors = None
-    if mesh.has_vertex_colors():
-        colors = (np.asarray(mesh.vertex_colors) * 255).round().astype(np.uint8)
-    return LabelledMesh(np.asarray(mesh.vertices, dtype=np.float64), faces,
-                        np.zeros(len(faces), dtype=np.int32), colors)  # fmt: skip
+    The valley and split depths smooth the surface over their radius in steps of one edge, so
+    the work grows with (radius / edge)^2: a mesh in micrometres would never finish.
+    """
+    scales = (
+        (params.valley_radius, params.valley_depth),
+        (params.split_radius, params.split_depth),
+    )
+    radius = max((r for r, depth in scales if depth > 0), default=0.0)
+    if radius > _MAX_RADIUS_EDGES * check.median_edge_m:
+        raise StockpileError(
+            f'{check.source}: the median edge ({check.median_edge_m:.3g} m) is under '
+            f'1/{_MAX_RADIUS_EDGES} of the smoothing radius ({radius:g} m): the segmentation '
+            'would not finish; check the units (--units) or coarsen the mesh'
+        )
 
 
 def _read_info(path: Path | None) -> dict[str, Any] | None:
@@ -97,7 +103,13 @@ def _read_info(path: Path | None) -> dict[str, Any] | None:
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     settings = settings_from_args(args)
-    mesh = _read_mesh(args.mesh)
+    mesh, check = read_mesh(args.mesh, args.units or 'm')
+    if not check.plausible and args.units is None:
+        hint = f' --units {check.likely_units}' if check.likely_units else ' --units'
+        raise StockpileError(
+            f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
+        )
+    _smoothing_guard(check, settings.segment)
     info = _read_info(args.mesh_info)
     # build_settings has checked that the table holds the class.
     spec = (
@@ -110,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
         seg_params=settings.segment, measure_params=settings.measure,
         spec=spec, mesh_info=info, source=str(args.mesh),
     )  # fmt: skip
+    analysis.report['mesh']['check'] = check.as_dict()
+    analysis.report['warnings'][:0] = check.warnings
     write_result_folder(args.out, analysis, spec)
     write_effective(settings, args.out)
     g = analysis.report['gradation']

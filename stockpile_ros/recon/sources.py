@@ -10,7 +10,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
+import numpy as np
 
+from ..bagio.images import DEFAULT_MAX_PIXELS, ImageError, check_pixels, image_size
 from ..camera import Frame
 from ..errors import StockpileError
 
@@ -46,10 +48,20 @@ def source_kind(source: Path) -> str:
     )
 
 
-def _photos(folder: Path) -> Iterator[Frame]:
+def _photos(folder: Path, max_pixels: int) -> Iterator[Frame]:
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     for index, path in enumerate(files):
-        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        data = path.read_bytes()
+        try:
+            _, width, height = image_size(data)
+        except ImageError:
+            continue  # not an image OpenCV could read either: skipped, as unreadable files are
+        # The decoder allocates what the header says, whatever the file's size: check it first.
+        try:
+            check_pixels(width, height, max_pixels, path.name)
+        except ImageError as exc:
+            raise StockpileError(f'{path}: {exc}') from None
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         if bgr is None:
             continue
         # Photos carry no stamps worth trusting; their order is their time.
@@ -63,12 +75,19 @@ def _photos(folder: Path) -> Iterator[Frame]:
         )
 
 
-def _video(path: Path) -> Iterator[Frame]:
+def _video(path: Path, max_pixels: int) -> Iterator[Frame]:
     capture = cv2.VideoCapture(str(path))
     if not capture.isOpened():
         raise StockpileError(f'{path}: OpenCV cannot open this video')
     index = 0
     try:
+        # The container states the stream's size; check it before the first frame is decoded.
+        width = round(capture.get(cv2.CAP_PROP_FRAME_WIDTH))
+        height = round(capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        try:
+            check_pixels(width, height, max_pixels, f'video frame of {path.name}')
+        except ImageError as exc:
+            raise StockpileError(f'{path}: {exc}') from None
         while True:
             ok, bgr = capture.read()
             if not ok:
@@ -82,14 +101,28 @@ def _video(path: Path) -> Iterator[Frame]:
         capture.release()
 
 
-def iter_frames(source: Path, topic: str | None = None) -> Iterator[Frame]:
-    """Frames of a bag (one image topic), a folder of photos (sorted by name) or a video."""
+def iter_frames(
+    source: Path, topic: str | None = None, *, max_pixels: int = DEFAULT_MAX_PIXELS
+) -> Iterator[Frame]:
+    """Frames of a bag (one image topic), a folder of photos (sorted by name) or a video.
+
+    Args:
+        source: Bag, photo folder or video file.
+        topic: The bag's image topic (None: the one with most messages).
+        max_pixels: Largest ``width * height`` decoded, read from each header before decoding.
+            A bag's larger images are skipped as bad messages; a larger photo or video ends the
+            run.
+
+    Raises:
+        StockpileError: (on iteration) a photo or video over the limit, or an unreadable source.
+
+    """
     kind = source_kind(source)
     if kind == 'bag':
         from ..bagio.reader import read_frames
 
-        yield from read_frames(source, topic)
+        yield from read_frames(source, topic, max_pixels=max_pixels)
     elif kind == 'photos':
-        yield from _photos(source)
+        yield from _photos(source, max_pixels)
     else:
-        yield from _video(source)
+        yield from _video(source, max_pixels)

@@ -1,0 +1,280 @@
+"""One check for every mesh a command reads: structure, degenerate and duplicate faces, scale.
+
+:func:`read_mesh` reads a mesh file (binary PLY with this package's reader; ASCII PLY, OBJ, STL
+and OFF through open3d, PLY headers checked against the file size first) and hands it to
+:func:`check_mesh`, which refuses what no stage can use and cleans what would mislead one:
+
+- refused (:class:`~stockpile_ros.errors.MeshError`): no vertices or faces, non-finite vertices,
+  face indices out of range, nothing left once degenerate and duplicate faces are dropped;
+- dropped and counted: faces that repeat a vertex index or have zero area (their normals are
+  undefined and their zero-length edges make edge-relative scales zero), and faces over the same
+  three vertices as an earlier face, in any order (a tripled surface would be three rocks deep);
+- flagged: a size implausible for a stockpile in the stated units, with the unit it most likely
+  is in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import MeshError
+from .meshio import LabelledMesh, check_arrays, check_ply_size, read_labelled_mesh, read_ply_header
+
+__all__ = [
+    'PLAUSIBLE_EDGE_M',
+    'PLAUSIBLE_EXTENT_M',
+    'UNITS',
+    'MeshCheck',
+    'check_mesh',
+    'read_mesh',
+]
+
+UNITS: dict[str, float] = {
+    'm': 1.0,
+    'cm': 0.01,
+    'mm': 0.001,
+    'km': 1000.0,
+    'in': 0.0254,
+    'ft': 0.3048,
+}
+"""Metres per unit of each length unit a mesh may be given in."""
+
+_UNIT_NAMES = {
+    'm': 'metres',
+    'cm': 'centimetres',
+    'mm': 'millimetres',
+    'km': 'kilometres (or scaled by 1/1000)',
+    'in': 'inches',
+    'ft': 'feet',
+}
+
+PLAUSIBLE_EXTENT_M = (0.01, 1000.0)
+"""Longest side of a stockpile's bounding box [m]: from a handful of pebbles to a mine's pile.
+
+This is a check of the units, not a rule of measurement, so it is stated in metres.
+"""
+
+PLAUSIBLE_EDGE_M = (1e-5, 1.0)
+"""Median edge length of a stockpile mesh [m]: finer than 10 µm or coarser than a metre is a mesh
+in other units (a metre-edged mesh still resolves a boulder of a few metres)."""
+
+# A face is of zero area when its height is within float64 rounding of nothing, relative to its
+# longest edge: scale-free, so the same faces are dropped whatever the units.
+_ZERO_HEIGHT = 1e-12
+# What a unit is judged against when several would make a mesh plausible: piles scanned from a
+# cart are a few metres across, and their Poisson meshes have edges of a few millimetres.
+_TYPICAL_EXTENT_M = 2.0
+_TYPICAL_EDGE_M = 0.005
+
+
+@dataclass
+class MeshCheck:
+    """What :func:`check_mesh` found and did.
+
+    Attributes:
+        source: The mesh, for messages.
+        vertices: Vertices of the mesh.
+        faces_read: Faces as read.
+        degenerate_faces: Faces dropped for a repeated vertex index or zero area.
+        duplicate_faces: Faces dropped for the vertex set of an earlier face.
+        units: Units the mesh was taken to be in.
+        metres_per_unit: Scale applied to the vertices to give metres.
+        extent_m: Longest side of the bounding box of the kept faces [m].
+        median_edge_m: Median edge length of the kept faces [m].
+        plausible: Whether extent and median edge are plausible for a stockpile.
+        likely_units: When not plausible, the unit that would make it so (None if none does).
+        warnings: One sentence per finding worth the user's attention.
+
+    """
+
+    source: str
+    vertices: int
+    faces_read: int
+    degenerate_faces: int
+    duplicate_faces: int
+    units: str
+    metres_per_unit: float
+    extent_m: float
+    median_edge_m: float
+    plausible: bool
+    likely_units: str | None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def faces_kept(self) -> int:
+        """Faces left after the drops."""
+        return self.faces_read - self.degenerate_faces - self.duplicate_faces
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return a JSON-ready dict (for a report)."""
+        return {**asdict(self), 'faces_kept': self.faces_kept}
+
+
+def _degenerate(vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]) -> Any:
+    """Mask of faces with a repeated vertex index or zero area."""
+    f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
+    repeated = (f0 == f1) | (f1 == f2) | (f0 == f2)
+    p0, p1, p2 = vertices[f0], vertices[f1], vertices[f2]
+    twice_area = np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
+    longest = np.max([np.einsum('ij,ij->i', d, d) for d in (p1 - p0, p2 - p1, p0 - p2)], axis=0)
+    return repeated | (twice_area <= _ZERO_HEIGHT * longest)
+
+
+def _first_of_each_set(faces: npt.NDArray[np.int64]) -> npt.NDArray[np.intp]:
+    """Return the indices, in file order, of the first face over each set of three vertices."""
+    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    return np.sort(first)
+
+
+def _plausible(extent_m: float, edge_m: float) -> bool:
+    lo, hi = PLAUSIBLE_EXTENT_M
+    elo, ehi = PLAUSIBLE_EDGE_M
+    return lo <= extent_m <= hi and elo <= edge_m <= ehi
+
+
+def _likely_units(extent_m: float, edge_m: float, metres_per_unit: float) -> str | None:
+    """Return the unit that makes the mesh plausible and nearest a typical pile's mesh."""
+    extent, edge = extent_m / metres_per_unit, edge_m / metres_per_unit
+    fits = [u for u, s in UNITS.items() if _plausible(extent * s, edge * s)]
+    if not fits:
+        return None
+
+    def distance(unit: str) -> float:  # in orders of magnitude, extent and edge together
+        scale = UNITS[unit]
+        return abs(math.log(extent * scale / _TYPICAL_EXTENT_M)) + abs(
+            math.log(edge * scale / _TYPICAL_EDGE_M)
+        )
+
+    return min(fits, key=distance)
+
+
+def check_mesh(
+    mesh: LabelledMesh, source: str | Path, units: str = 'm'
+) -> tuple[LabelledMesh, MeshCheck]:
+    """Validate a mesh, drop its degenerate and duplicate faces, scale it to metres.
+
+    Args:
+        mesh: The mesh as read, in ``units``.
+        source: The file, for messages.
+        units: A key of :data:`UNITS`: what the vertex coordinates are in.
+
+    Returns:
+        The mesh in metres with the kept faces (their labels with them; vertices are kept even
+        when no face uses them, so vertex-indexed data stays aligned), and what was found.
+
+    Raises:
+        MeshError: Unknown units, a mesh :func:`~stockpile_ros.meshio.check_arrays` refuses, or
+            no face left after the drops.
+
+    """
+    if units not in UNITS:
+        raise MeshError(f'unknown units {units!r} (known: {", ".join(UNITS)})')
+    scale = UNITS[units]
+    vertices = np.asarray(mesh.vertices, dtype=np.float64) * scale
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    check_arrays(vertices, faces, source)
+    degenerate = _degenerate(vertices, faces)
+    kept = np.flatnonzero(~degenerate)
+    unique = kept[_first_of_each_set(faces[kept])]
+    duplicates = len(kept) - len(unique)
+    if len(unique) == 0:
+        raise MeshError(
+            f'{source}: all {len(faces)} faces are degenerate (repeated vertex or zero area)'
+        )
+    faces, labels = faces[unique], np.asarray(mesh.labels)[unique]
+    used = vertices[np.unique(faces)]
+    extent = float(np.max(used.max(axis=0) - used.min(axis=0)))
+    edge = float(
+        np.median(np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, 1)], axis=2))
+    )
+    plausible = _plausible(extent, edge)
+    check = MeshCheck(
+        str(source), len(vertices), len(mesh.faces), int(degenerate.sum()), duplicates, units,
+        scale, extent, edge, plausible, None if plausible else _likely_units(extent, edge, scale),
+    )  # fmt: skip
+    if check.degenerate_faces:
+        check.warnings.append(
+            f'{check.degenerate_faces} degenerate faces dropped (repeated vertex or zero area)'
+        )
+    if duplicates:
+        check.warnings.append(
+            f'{duplicates} duplicate faces dropped (the vertices of an earlier face)'
+        )
+    if not plausible:
+        likely = (
+            f'it looks like {_UNIT_NAMES[check.likely_units]}'
+            if check.likely_units
+            else 'no length unit makes it plausible'
+        )
+        check.warnings.append(
+            f'implausible size for a stockpile in {_UNIT_NAMES[units]}: {extent:.4g} m across '
+            f'with a median edge of {edge:.3g} m (expected {PLAUSIBLE_EXTENT_M[0]:g}-'
+            f'{PLAUSIBLE_EXTENT_M[1]:g} m across, edges {PLAUSIBLE_EDGE_M[0]:g}-'
+            f'{PLAUSIBLE_EDGE_M[1]:g} m); {likely}'
+        )
+    colors = mesh.colors
+    return LabelledMesh(vertices, faces, labels.astype(np.int32), colors), check
+
+
+def _read_with_open3d(path: Path) -> LabelledMesh:
+    import open3d
+
+    o3d: Any = open3d
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    faces = np.asarray(mesh.triangles, dtype=np.int64)
+    if len(faces) == 0:
+        raise MeshError(f'{path}: not a triangle mesh open3d or stockpile_ros can read')
+    colors = None
+    if mesh.has_vertex_colors():
+        colors = (np.clip(np.asarray(mesh.vertex_colors), 0, 1) * 255).round().astype(np.uint8)
+    return LabelledMesh(np.asarray(mesh.vertices, dtype=np.float64), faces,
+                        np.zeros(len(faces), dtype=np.int32), colors)  # fmt: skip
+
+
+def read_mesh(path: str | Path, units: str = 'm') -> tuple[LabelledMesh, MeshCheck]:
+    """Read a mesh file and :func:`check_mesh` it.
+
+    Binary PLY goes through :func:`~stockpile_ros.meshio.read_labelled_mesh` (labels kept);
+    ASCII PLY has its header checked against the file size before open3d reads it; other formats
+    (OBJ, STL, OFF) are read by open3d.
+
+    Args:
+        path: The mesh file.
+        units: What its coordinates are in (a key of :data:`UNITS`).
+
+    Returns:
+        The checked mesh in metres and the check.
+
+    Raises:
+        MeshError: The file is missing, unreadable or malformed, or the mesh is refused.
+
+    """
+    path = Path(path)
+    try:
+        with path.open('rb') as stream:
+            head = stream.read(3)
+            if head == b'ply':
+                raw = head + stream.read()
+                header = read_ply_header(raw, path)
+                check_ply_size(header, len(raw), path)
+                del raw
+                mesh = (
+                    _read_with_open3d(path)
+                    if header.format == 'ascii'
+                    else read_labelled_mesh(path)
+                )
+            else:
+                mesh = _read_with_open3d(path)
+    except FileNotFoundError:
+        raise MeshError(f'{path}: no such mesh file') from None
+    except IsADirectoryError:
+        raise MeshError(f'{path}: a folder, not a mesh file') from None
+    except OSError as exc:
+        raise MeshError(f'{path}: cannot read ({exc.strerror or exc})') from None
+    return check_mesh(mesh, path, units)

@@ -1,0 +1,372 @@
+"""Hostile inputs through the command line: image bombs, malformed meshes, meshes in other units.
+
+Each case runs ``stockpile_ros.cli.main`` in this process and asserts the exit code, that the
+message names the cause, that no traceback was printed, and the peak of traced memory (numpy
+reports its buffers to tracemalloc, so an array the size a header claims would show).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import tracemalloc
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+from segment_fixtures import small_pile
+
+from stockpile_ros import messages as m
+from stockpile_ros.bagio.writer import BagWriter
+from stockpile_ros.cli import main
+from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+
+S = 1_000_000_000
+MB = 1 << 20
+# Every bomb here would allocate at least 290 MB if its header were believed.
+PEAK_BOUND = 200 * MB
+IMAGE_TOPIC = '/cam/image_raw'
+
+
+def _run(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, str, str, int]:
+    """Exit code, stdout, stderr and traced peak memory [bytes] of one command."""
+    capsys.readouterr()
+    tracemalloc.start()
+    try:
+        code = main(argv)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    out, err = capsys.readouterr()
+    assert 'Traceback' not in err and 'Traceback' not in out
+    return code, out, err, peak
+
+
+# --- image bombs in bags ---------------------------------------------------------------------
+
+
+def _bag(path: Path, messages: list[Any]) -> Path:
+    with BagWriter(path) as bag:
+        for i, msg in enumerate(messages):
+            bag.write(IMAGE_TOPIC, msg, S + i * S // 10)
+    return path
+
+
+def _png(width: int, height: int) -> bytes:
+    """A valid all-black grey PNG of any size; the zlib stream of zero rows stays small."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = zlib.crc32(kind + body)
+        return struct.pack('>I', len(body)) + kind + body + struct.pack('>I', crc)
+
+    packer = zlib.compressobj(9)
+    row = b'\x00' * (width + 1)  # filter byte and the row
+    rows = [packer.compress(row * 100) for _ in range(height // 100)]
+    rows.append(packer.compress(row * (height % 100)) + packer.flush())
+    ihdr = struct.pack('>IIBBBBB', width, height, 8, 0, 0, 0, 0)
+    return (b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', ihdr) + chunk(b'IDAT', b''.join(rows))
+            + chunk(b'IEND', b''))  # fmt: skip
+
+
+def _jpeg(width: int, height: int) -> bytes:
+    """A small real JPEG whose frame header is rewritten to claim ``width`` x ``height``."""
+    ok, buf = cv2.imencode('.jpg', np.full((16, 16, 3), 90, np.uint8))
+    assert ok
+    data = bytearray(buf.tobytes())
+    sof = data.index(b'\xff\xc0')
+    data[sof + 5 : sof + 9] = struct.pack('>HH', height, width)
+    return bytes(data)
+
+
+def _raw(f: Any, width: int, height: int, step: int, data: bytes) -> Any:
+    msg = m.image(f, np.zeros((1, 1), np.uint8), S, 'cam')
+    msg.width, msg.height, msg.step, msg.data = width, height, step, np.frombuffer(data, np.uint8)
+    return msg
+
+
+def _compressed(f: Any, fmt: str, data: bytes) -> Any:
+    msg = m.compressed_image(f, np.zeros((4, 4), np.uint8), S, 'cam')
+    msg.format, msg.data = fmt, np.frombuffer(data, np.uint8)
+    return msg
+
+
+IMAGE_CASES: dict[str, tuple[Callable[[Any], Any], tuple[str, ...]]] = {
+    # 1x1 mono8 with a step of 4e9: the old decoder padded the missing bytes with zeros (4 GB).
+    'step bomb': (
+        lambda f: _raw(f, 1, 1, 4_000_000_000, b'\x07'),
+        ('step 4000000000', 'larger than the whole data'),
+    ),
+    # 1x50000 with a row pitch of 50000 bytes: 2.5 GB were padded.
+    'step bomb, tall': (
+        lambda f: _raw(f, 1, 50_000, 50_000, b'\x07' * 50_000),
+        ('data holds 50000 bytes', 'needs'),
+    ),
+    'raw width*height bomb': (
+        lambda f: _raw(f, 20_000, 20_000, 20_000, b'\x00' * 64),
+        ('20000x20000', 'megapixels'),
+    ),
+    'png header bomb': (lambda f: _compressed(f, 'png', _png(10_000, 10_000)), ('10000x10000',)),
+    'jpeg header bomb': (lambda f: _compressed(f, 'jpeg', _jpeg(20_000, 20_000)), ('20000x20000',)),
+    'truncated jpeg': (lambda f: _compressed(f, 'jpeg', _jpeg(16, 16)[:200]), ('truncated JPEG',)),
+    'jpeg without a frame header': (
+        lambda f: _compressed(f, 'jpeg', b'\xff\xd8\xff\xe0\x00\x04ab\xff\xda\x00\x02\xff\xd9'),
+        ('before any frame header',),
+    ),
+}
+
+
+@pytest.mark.parametrize('case', list(IMAGE_CASES))
+def test_image_bombs_are_bad_messages_named_by_info(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
+) -> None:
+    make, words = IMAGE_CASES[case]
+    with BagWriter(tmp_path / 'bag') as bag:
+        bad = make(bag.factory)
+        good = (m.compressed_image if hasattr(bad, 'format') else m.image)(
+            bag.factory, np.zeros((6, 8), np.uint8), S, 'cam'
+        )
+        bag.write(IMAGE_TOPIC, bad, S)
+        bag.write(IMAGE_TOPIC, good, 2 * S)
+    code, out, _, peak = _run(capsys, ['info', str(tmp_path / 'bag')])
+    assert code == 0  # bad messages are reported, not fatal
+    assert '1/2 decoded' in out and 'message 0' in out
+    for word in words:
+        assert word in out
+    assert peak < PEAK_BOUND
+
+
+def test_replay_of_step_bombs_skips_every_frame(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with BagWriter(tmp_path / 'bag') as bag:
+        for i in range(3):
+            bag.write(IMAGE_TOPIC, _raw(bag.factory, 1, 1, 4_000_000_000, b'\x07'), S + i * S)
+    code, _, err, peak = _run(
+        capsys, ['replay', str(tmp_path / 'bag'), '--out', str(tmp_path / 'o')]
+    )
+    assert code == 1 and peak < PEAK_BOUND
+    report = (tmp_path / 'o').rglob('*')
+    assert any(p.name == 'replay.mcap' for p in report)
+    assert 'keyframe' in err or 'frames' in err
+
+
+# --- photo folders ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ('name', 'data'),
+    [('a_huge.png', lambda: _png(10_000, 10_000)), ('a_huge.jpg', lambda: _jpeg(20_000, 20_000))],
+)
+def test_huge_photo_in_a_folder_is_refused_by_name(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, data: Callable[[], bytes]
+) -> None:
+    photos = tmp_path / 'photos'
+    photos.mkdir()
+    (photos / name).write_bytes(data())
+    cv2.imwrite(str(photos / 'b_ok.png'), np.zeros((8, 8, 3), np.uint8))
+    argv = ['reconstruct', str(photos), '--work', str(tmp_path / 'w'), '--stage', 'keyframes']
+    code, _, err, peak = _run(capsys, argv)
+    assert code == 2 and peak < PEAK_BOUND
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and name in lines[0] and 'megapixels' in lines[0]
+
+
+# --- meshes ----------------------------------------------------------------------------------
+
+
+def _ply(path: Path, vertices: Any, faces: Any) -> Path:
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    write_labelled_mesh(path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    return path
+
+
+TETRA_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+TETRA_F = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+# The first face as written: its vertex count, then indices 0 and 2 as little-endian int32.
+FIRST_FACE = b'\x03' + struct.pack('<ii', 0, 2)
+
+
+def _edit_header(path: Path, old: bytes, new: bytes) -> Path:
+    raw = path.read_bytes()
+    assert old in raw
+    path.write_bytes(raw.replace(old, new, 1))
+    return path
+
+
+MESH_CASES: dict[str, tuple[Callable[[Path], Path], tuple[str, ...]]] = {
+    'zero vertices': (lambda p: _ply(p, np.zeros((0, 3)), np.zeros((0, 3))), ('0 vertices',)),
+    'nan vertices': (
+        lambda p: _ply(p, [*TETRA_V[:3], [np.nan, 0, 1]], TETRA_F),
+        ('1 of 4 vertices are not finite',),
+    ),
+    'inf vertices': (lambda p: _ply(p, [*TETRA_V[:3], [np.inf, 0, 1]], TETRA_F), ('not finite',)),
+    'index out of range': (
+        lambda p: _ply(p, TETRA_V, [*TETRA_F[:3], [1, 2, 9]]),
+        ('outside 0..3', 'face 3'),
+    ),
+    'negative index': (lambda p: _ply(p, TETRA_V, [*TETRA_F[:3], [-1, 2, 3]]), ('outside 0..3',)),
+    'blank header line': (
+        lambda p: _edit_header(_ply(p, TETRA_V, TETRA_F), b'\nelement face', b'\n\nelement face'),
+        ('header line', 'blank'),
+    ),
+    'garbage in the header': (
+        lambda p: _edit_header(_ply(p, TETRA_V, TETRA_F), b'property float y', b'propty float y'),
+        ("unknown keyword 'propty'",),
+    ),
+    'unknown property type': (
+        lambda p: _edit_header(_ply(p, TETRA_V, TETRA_F), b'property float y', b'property flt y'),
+        ('expected "property TYPE NAME"',),
+    ),
+    'truncated body': (
+        lambda p: p.write_bytes(_ply(p, TETRA_V, TETRA_F).read_bytes()[:-20]) and p,
+        ('claims 4 vertex, 4 face', 'truncated'),
+    ),
+    'vertex count 1000x': (
+        lambda p: _edit_header(
+            _ply(p, TETRA_V, TETRA_F), b'element vertex 4', b'element vertex 4000'
+        ),
+        ('claims 4000 vertex',),
+    ),
+    'face count 1e12': (
+        lambda p: _edit_header(
+            _ply(p, TETRA_V, TETRA_F), b'element face 4', b'element face 1000000000000'
+        ),
+        ('claims 4 vertex, 1000000000000 face',),
+    ),
+    'ascii counts over the file size': (
+        lambda p: (
+            p.write_text(
+                'ply\nformat ascii 1.0\nelement vertex 100000000\nproperty float x\n'
+                'property float y\nproperty float z\nelement face 1\n'
+                'property list uchar int vertex_indices\nend_header\n0 0 0\n3 0 0 0\n'
+            )
+            and p
+        ),
+        ('claims 100000000 vertex', 'at least'),
+    ),
+    'quads': (
+        lambda p: _edit_header(_ply(p, TETRA_V, TETRA_F), FIRST_FACE, b'\x04' + FIRST_FACE[1:]),
+        ('only triangle faces',),
+    ),
+    'all faces degenerate': (
+        lambda p: _ply(p, [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2], [0, 0, 1]]),
+        ('all 2 faces are degenerate',),
+    ),
+    'not a mesh at all': (lambda p: p.write_bytes(b'\x00garbage' * 10) and p, ('not a triangle',)),
+    'obj with bad content': (
+        lambda p: (
+            p.with_suffix('.obj').write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\nxyz\n')
+            and p.with_suffix('.obj')
+        ),
+        ('mesh.obj',),
+    ),
+    'obj with nan vertices': (
+        lambda p: (
+            p.with_suffix('.obj').write_text('v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n')
+            and p.with_suffix('.obj')
+        ),
+        ('not finite',),
+    ),
+    'missing file': (lambda p: p.with_name('nothing.ply'), ('no such mesh file',)),
+}
+
+
+@pytest.mark.parametrize('case', list(MESH_CASES))
+def test_malformed_meshes_are_refused_with_the_cause(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
+) -> None:
+    make, words = MESH_CASES[case]
+    mesh = make(tmp_path / 'mesh.ply')
+    out = tmp_path / 'result'
+    code, _, err, peak = _run(capsys, ['segment', str(mesh), '--out', str(out)])
+    assert code == 2, err
+    assert err.startswith('stockpile segment: error: ') and len(err.strip().splitlines()) <= 2
+    for word in words:
+        assert word in err
+    assert not out.exists() and peak < PEAK_BOUND
+
+
+def _segment(
+    capsys: pytest.CaptureFixture[str], mesh: Path, out: Path, *args: str
+) -> tuple[int, str, dict[str, Any]]:
+    code, _, err, peak = _run(capsys, ['segment', str(mesh), '--out', str(out), *args])
+    assert code == 0, err
+    assert peak < PEAK_BOUND
+    return code, err, json.loads((out / 'report.json').read_text())
+
+
+def _rocks(report: dict[str, Any]) -> list[float]:
+    """Each rock's intermediate dimension and mass, in report order."""
+    return [value for r in report['rocks'] for value in (r['b'], r['mass'])]
+
+
+def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_result(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    v, f, _ = small_pile()
+    _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
+    assert clean['mesh']['check']['duplicate_faces'] == 0
+    # Each face three times (the copies with their vertices rotated and reversed), then faces
+    # that repeat a vertex and a zero-area face over three collinear vertices.
+    far = len(v)
+    line = np.array([[0.5, 0.5, 0.0], [0.6, 0.5, 0.0], [0.7, 0.5, 0.0]])
+    bad = [[0, 0, 1], [2, 3, 3], [far, far + 1, far + 2]]
+    faces = np.concatenate([f, f[:, [1, 2, 0]], f[:, ::-1], bad])
+    mesh = _ply(tmp_path / 'tripled.ply', np.concatenate([v, line]), faces)
+    _, err, tripled = _segment(capsys, mesh, tmp_path / 't')
+    check = tripled['mesh']['check']
+    assert (check['duplicate_faces'], check['degenerate_faces']) == (2 * len(f), 3)
+    assert check['faces_kept'] == len(f)
+    assert f'{2 * len(f)} duplicate faces dropped' in err and '3 degenerate faces' in err
+    assert _rocks(tripled) == pytest.approx(_rocks(clean))
+    assert len(tripled['rocks']) == len(clean['rocks']) > 0
+
+
+def test_many_zero_length_edges_do_not_hang_the_segmentation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # More degenerate faces than good ones: their zero edges would be the median edge.
+    v, f, _ = small_pile()
+    zero = np.repeat(np.arange(len(f) * 2)[:, None] % len(v), 3, axis=1)
+    mesh = _ply(tmp_path / 'mesh.ply', v, np.concatenate([f, zero]))
+    _, _, report = _segment(capsys, mesh, tmp_path / 'r')
+    assert report['mesh']['check']['degenerate_faces'] == 2 * len(f)
+    assert report['segmentation']['seconds'] < 60
+
+
+@pytest.mark.parametrize(
+    ('scale', 'units', 'words'),
+    [
+        (1000.0, 'mm', ('looks like millimetres', '--units mm')),
+        (1e-3, 'km', ('kilometres', '--units km')),
+    ],
+)
+def test_a_mesh_in_other_units_is_refused_unless_its_units_are_given(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], scale: float, units: str,
+    words: tuple[str, ...],
+) -> None:  # fmt: skip
+    v, f, _ = small_pile()
+    mesh = _ply(tmp_path / 'mesh.ply', v * scale, f)
+    code, _, err, _ = _run(capsys, ['segment', str(mesh), '--out', str(tmp_path / 'r')])
+    assert code == 2 and 'implausible size' in err
+    for word in words:
+        assert word in err
+    _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
+    _, _, scaled = _segment(capsys, mesh, tmp_path / 's', '--units', units)
+    assert _rocks(scaled) == pytest.approx(_rocks(clean), rel=1e-4)
+    assert scaled['mesh']['check']['units'] == units
+
+
+def test_explicit_units_that_leave_the_mesh_too_fine_are_refused_not_hung(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    v, f, _ = small_pile()
+    mesh = _ply(tmp_path / 'mesh.ply', v * 1e-3, f)
+    argv = ['segment', str(mesh), '--out', str(tmp_path / 'r'), '--units', 'm']
+    code, _, err, _ = _run(capsys, argv)
+    assert code == 2 and 'would not finish' in err and '--units' in err
