@@ -47,8 +47,9 @@ Qos = Literal['sensor', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
   again, so it matches any publisher; the depth lets a busy node catch up on a burst instead of
   losing frames or odometry samples, which would change the keyframes and their poses);
 - ``reliable``: reliable, volatile, keep last 10 (triggers);
-- ``stream``: reliable, volatile, keep all (keyframes: every one must arrive, none is replayed to
-  a late subscriber, which would hold every image in memory);
+- ``stream``: reliable, transient local, keep all (keyframes: every one must arrive, also at a
+  reconstruction that matched the keyframe node after the first ones were sent, or restarted;
+  the publisher holds at most ``selector.max_keyframes`` of them);
 - ``latched``: reliable, transient local, keep last 1 (results: a dashboard that joins late gets
   the last one);
 - ``tf`` and ``tf_static``: what tf2's own listener and broadcasters use (keep last 100, the static

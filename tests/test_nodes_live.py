@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy (ROS 2 Jazzy) is not installed here')
@@ -27,6 +28,7 @@ from stockpile_ros.cli import main as cli  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
 from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
+from stockpile_ros.recon.keyframes import KeyframeStore  # noqa: E402
 from stockpile_ros.replay import replay  # noqa: E402
 from stockpile_ros.settings import build_settings  # noqa: E402
 
@@ -45,7 +47,8 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope='module')
-def replayed(bag: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Any]]:
+def replayed(bag: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Every output of `stockpile replay` of the bag, by topic, and its work folder as 'work'."""
     out = tmp_path_factory.mktemp('replay')
     summary = replay(bag, out, build_settings(PARAMS))
     assert summary.ok, summary.problems
@@ -54,7 +57,17 @@ def replayed(bag: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, l
         names = [topics.absolute(t.name) for t in OUTPUTS]
         for name, _, _, msg in reader.messages([n for n in names if n in reader.reader.topics]):
             got.setdefault(name, []).append(msg)
-    return {t.name: got.get(topics.absolute(t.name), []) for t in OUTPUTS}
+    return {t.name: got.get(topics.absolute(t.name), []) for t in OUTPUTS} | {'work': out / 'work'}
+
+
+def _same_keyframes(live: Path, replayed: Path) -> None:
+    """The reconstruction held the same keyframes, with the same camera and poses, to the bit."""
+    held = [KeyframeStore(folder / 'keyframes').records for folder in (live, replayed)]
+    assert [r.index for r in held[0]] == [r.index for r in held[1]]
+    for a, b in zip(*held, strict=True):
+        assert a.odometry == b.odometry and a.odometry and 'camera_position' in a.odometry
+        assert a.camera is not None and b.camera is not None
+        assert np.array_equal(a.camera.k, b.camera.k)
 
 
 def _statuses(msgs: list[Any]) -> list[tuple[int, str, str, int]]:
@@ -79,7 +92,7 @@ def _same_d50(live: list[Any], replayed: list[Any]) -> None:
 
 
 def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
-    ros: None, bag: Path, replayed: dict[str, list[Any]], tmp_path: Path
+    ros: None, bag: Path, replayed: dict[str, Any], tmp_path: Path
 ) -> None:
     work = [Parameter('work_dir', value=str(tmp_path / 'work'))]
     work += [Parameter(k, value=v) for k, v in PARAMS.items()]
@@ -96,7 +109,7 @@ def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
         assert _statuses(recorder.on(topics.STATUS)) == _statuses(replayed[topics.STATUS])
         kept = recorder.on(topics.KEYFRAMES)
         assert [k.frame_index for k in kept] == [k.frame_index for k in replayed[topics.KEYFRAMES]]
-        assert all(k.has_odometry and k.has_camera_pose for k in kept)
+        _same_keyframes(tmp_path / 'work', replayed['work'])
         _same_rocks(recorder.on(topics.ROCKS), replayed[topics.ROCKS])
         _same_d50(recorder.on(topics.GRADATION), replayed[topics.GRADATION])
         late = Recorder('stockpile_test_late')
@@ -107,7 +120,10 @@ def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
         ):
             time.sleep(0.05)
         _same_rocks(late.on(topics.ROCKS), replayed[topics.ROCKS])
-        assert not late.on(topics.KEYFRAMES)  # a stream, not latched: nothing replayed late
+        # Keyframes are kept for late joiners too (a base station that starts after the pass).
+        while len(late.on(topics.KEYFRAMES)) < len(kept) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert [k.frame_index for k in late.on(topics.KEYFRAMES)] == [k.frame_index for k in kept]
     finally:
         executor.shutdown()
         thread.join(5)
@@ -119,7 +135,7 @@ def test_all_in_one_matches_replay_and_late_subscribers_get_the_results(
 
 
 def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
-    ros: None, bag: Path, replayed: dict[str, list[Any]], tmp_path: Path
+    ros: None, bag: Path, replayed: dict[str, Any], tmp_path: Path
 ) -> None:
     cart, base = rig('cart', tmp_path / 'cart', PARAMS), rig('base', tmp_path / 'base', PARAMS)
     recorder = Recorder()
@@ -128,6 +144,8 @@ def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
         play(bag)
         assert trigger(recorder).success
         wait(recorder)
+        _same_keyframes(tmp_path / 'base', replayed['work'])
+        assert _statuses(recorder.on(topics.STATUS)) == _statuses(replayed[topics.STATUS])
         _same_rocks(recorder.on(topics.ROCKS), replayed[topics.ROCKS])
         _same_d50(recorder.on(topics.GRADATION), replayed[topics.GRADATION])
         # Nothing on a shared disk: the cart holds its capture, the base station the rest.
@@ -141,4 +159,6 @@ def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
         for proc in (cart, base):
             proc.send_signal(signal.SIGINT)
         codes = [proc.wait(timeout=30) for proc in (cart, base)]
-    assert codes == [0, 0], [proc.stdout.read() if proc.stdout else '' for proc in (cart, base)]
+        for name, proc in (('cart', cart), ('base', base)):
+            (tmp_path / f'{name}.log').write_text(proc.stdout.read() if proc.stdout else '')
+    assert codes == [0, 0], f'exit codes {codes}: see {tmp_path}/cart.log and base.log'

@@ -174,6 +174,7 @@ def test_qos_profile_follows_the_table() -> None:
     assert static.reliability == ReliabilityPolicy.RELIABLE
     stream = qos_profile(topics.topic(topics.KEYFRAMES).qos)
     assert stream.history == HistoryPolicy.KEEP_ALL
+    assert stream.durability == DurabilityPolicy.TRANSIENT_LOCAL
     latched = qos_profile(topics.topic(topics.STATUS).qos)
     assert latched.depth == 1 and latched.durability == DurabilityPolicy.TRANSIENT_LOCAL
 

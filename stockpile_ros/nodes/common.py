@@ -46,7 +46,7 @@ def qos_profile(qos: topics.Qos) -> QoSProfile:
     depth = topics.QOS_DEPTH[qos]
     history = HistoryPolicy.KEEP_ALL if depth == 0 else HistoryPolicy.KEEP_LAST
     reliability = ReliabilityPolicy.BEST_EFFORT if qos == 'sensor' else ReliabilityPolicy.RELIABLE
-    durable = qos in ('latched', 'tf_static')
+    durable = qos in ('stream', 'latched', 'tf_static')
     durability = DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE
     return QoSProfile(history=history, depth=max(depth, 1), reliability=reliability,
                       durability=durability)  # fmt: skip

@@ -74,12 +74,16 @@ class BagPlayer(Node):
         """Publish the bag at ``rate`` times its recorded pace (``<= 0``: as fast as possible)."""
         return play(self.bag, list(self.entries), self.publish, rate)
 
-    def run(self, rate: float, wait_subscribers: float, linger: float) -> PlayStats:
+    def run(self, rate: float, wait_subscribers: float, linger: float, settle: float) -> PlayStats:
         """Wait for subscribers, play the bag, then wait for delivery; see :func:`main`."""
         log = Node.get_logger(self)
         # DDS discovery takes a moment: without the wait the first messages reach nobody.
         if not wait_until(lambda: not self.unheard(), wait_subscribers):
             log.warning('no subscriber yet on ' + ', '.join(self.unheard()))
+        # Matching is not symmetric: this side sees the subscriber before the subscriber has
+        # matched this side, and a best-effort sample sent in between is lost (the first frame
+        # was, now and then: every keyframe after it then shifted).
+        time.sleep(settle)
         stats = self.play(rate)
         if not self.flush(linger):
             log.warning(f'not every reliable message was acknowledged within {linger} s')
@@ -126,6 +130,13 @@ def main(args: list[str] | None = None) -> int:
         help='wait up to this long for a subscriber on every topic before playing',
     )
     parser.add_argument(
+        '--settle',
+        type=float,
+        default=1.0,
+        metavar='SECONDS',
+        help='once every topic has a subscriber, wait this long for it to match the player too',
+    )
+    parser.add_argument(
         '--map',
         type=parse_mapping,
         action='append',
@@ -148,7 +159,7 @@ def main(args: list[str] | None = None) -> int:
         with BagReader(options.bag) as bag:
             node = BagPlayer(bag, dict(options.map))
             try:
-                node.run(options.rate, options.wait_subscribers, options.linger)
+                node.run(options.rate, options.wait_subscribers, options.linger, options.settle)
             finally:
                 Node.destroy_node(node)
     except (StockpileError, ValueError) as exc:
