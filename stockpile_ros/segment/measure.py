@@ -164,11 +164,7 @@ def _mirror_height(points: F64, rim: F64, bins: int) -> float:
 
 
 def complete_rock(
-    points: F64,
-    rim: F64,
-    completion: CompletionRule = 'mirror',
-    bins: int = 12,
-    ground_contact: float = 0.03,
+    points: F64, rim: F64, completion: CompletionRule, bins: int, ground_contact: float
 ) -> F64:
     """Points whose convex hull is the completed rock (see the module documentation).
 
