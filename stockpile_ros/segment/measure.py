@@ -87,8 +87,8 @@ class MeasureParams:
         ground_contact_edges: A rock whose lowest visible point is under this height rests on
             the ground [in median edge lengths of the mesh: the ground was cut off at
             ``segment.ground_tolerance_edges``, and the skirt Poisson leaves round the foot of a
-            rock is a few of its cells high; 6 is the 3 cm used on reconstructed piles, at about
-            5 mm edges].
+            rock is a few of its cells high; 6 is the 3 cm used on reconstructed piles, at the
+            4-5 mm median edge of their depth-9 meshes].
         extent_trim: Share of the surface area left out at each end of each axis when the extents
             are measured (0: the extreme face centroids). Where rocks touch or hide each other,
             stereo leaves a fringe of surface up to 2 cm outside the rock (the points that set b

@@ -114,7 +114,9 @@ class SegmentParams:
         min_rock_edges: The smallest rock of interest when neither ``min_rock_b`` nor a class
             gives it [in median edge lengths].
         ground_tolerance_edges: Height above ``z = 0`` under which a face is ground [in median
-            edge lengths; 2 is the 1 cm measured on reconstructed piles, at about 5 mm edges].
+            edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
+            a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
+            bench/bench_scale.py's piles)].
         ground_min_nz: Smallest normal z component of a ground face (0: any face that does not
             face down; the skirt Poisson puts round the foot of a rock slopes).
         min_region_share: Regions of less area than this share of the plan area of the smallest
@@ -124,7 +126,7 @@ class SegmentParams:
             half as wide as the smallest rock: a rock is seen on more than its plan area, but a
             partly hidden one on less. On bench/bench_scale.py's coarse pile (150 rocks of 11-22
             edge lengths across) discs of 10 to 20 edge lengths across lost no rock, discs of 28
-            and 30 lost 32 and 45; with 10 to 20, precision stayed at 0.98-0.99 on every pile.
+            and 30 lost 32 and 45; with 10 to 20, precision stayed at 0.976 or more on every pile.
         merge_fragments: Merge fragments into the neighbouring region they share the most edges
             with; when off, or when a fragment has no neighbour, it gets label 0 [off].
         merge_convex: After the fragment merge, join neighbouring regions whose union is convex
@@ -144,11 +146,11 @@ class SegmentParams:
             median b error from 7.0 % to 5.4 % and the mean D50 error from 9.8 % to 4.3 %; 0.3 mm
             and 0.7 mm did worse on b or D50.
         valley_radius_b: Scale of the smoothed surroundings: the standard deviation of the
-            smoothing kernel [in units of ``min_rock_b``; on reconstructed piles, meshed at about
-            5 mm edges, 7.5 mm (1.5 edge lengths) measured as well as 5 and 10 mm: 0.075 keeps
-            it there when ``min_rock_b`` comes from the mesh]. A crease is only seen at a scale
-            wider than the rounding Poisson gave it, and the crevices between larger rocks are
-            wider.
+            smoothing kernel [in units of ``min_rock_b``; on reconstructed piles (depth-9 meshes,
+            4-5 mm edges) 7.5 mm, about 1.5 edge lengths, measured as well as 5 and 10 mm: 0.075
+            keeps it there when ``min_rock_b`` comes from the mesh]. A crease is only seen at a
+            scale wider than the rounding Poisson gave it, and the crevices between larger rocks
+            are wider.
         split_depth_ratio: Faces deeper than this under their surroundings at the scale
             ``split_radius_b`` cut a region; where they cut it into two or more parts of at
             least ``split_min_share`` of its area each, the parts become regions of their own (see
