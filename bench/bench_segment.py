@@ -72,11 +72,15 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
     print(f'paper mode, one core, best of {repeat}: total {total:.2f} s '
           f'(geometry {t_geom:.2f}, adjacency {t_adj:.2f}, Eq. 2 on all edges {t_score:.2f}, '
           f'search {t_grow:.2f}); {fast.max()} regions')  # fmt: skip
-    t_default = best_of(lambda: segment_mesh(v, f, SegmentParams()), repeat)
     d = SegmentParams()
-    t_valley = best_of(lambda: valley_depths(v, f, g, [d.valley_radius, d.split_radius]), repeat)
+    t_default = best_of(lambda: segment_mesh(v, f, d), repeat)
+    scale = segment_mesh(v, f, d).scale
+    radii = [d.valley_radius_b * scale.min_rock_b, d.split_radius_b * scale.min_rock_b]
+    t_valley = best_of(lambda: valley_depths(v, f, g, radii, scale.edge), repeat)
     print(f'default mode, one core, best of {repeat}: total {t_default:.2f} s '
-          f'(valley depths at {d.valley_radius * 1000:g} and {d.split_radius * 1000:g} mm: '
+          f'(median edge {scale.edge * 1000:.2f} mm, smallest rock {scale.min_rock_b * 1000:.0f} '
+          f'mm; '
+          f'valley depths at {radii[0] * 1000:.1f} and {radii[1] * 1000:.1f} mm: '
           f'{t_valley:.2f})')  # fmt: skip
     if reference:
         t0 = time.perf_counter()

@@ -4,6 +4,7 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from segment_fixtures import small_pile
 
 from stockpile_ros import messages as m
@@ -51,6 +52,10 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     spec = report['gradation']['spec']
     assert spec['class'] == 'I' and spec['checked'] and isinstance(spec['passed'], bool)
     assert report['segmentation']['mode'] == 'default'
+    # The class checked sets the smallest rock of interest: half class I's smallest D15.
+    scale = report['segmentation']['scale']
+    assert scale['source'] == 'class' and scale['min_rock_b'] == pytest.approx(0.5 * 3.7 * 0.0254)
+    assert scale['edge'] > 0
     assert report['mesh']['faces'] == len(f)
     assert any('kf_00044_000145.png' in w for w in report['warnings'])
     seg = read_labelled_mesh(out / 'segments.ply')
@@ -74,6 +79,7 @@ def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
     assert report['scale']['method'] == 'none'
     assert report['segmentation']['threshold'] == 0.7
     assert report['gradation']['spec']['checked'] is False
+    assert report['segmentation']['scale']['source'] == 'mesh'
 
 
 def test_cli_errors_are_messages(tmp_path, capsys) -> None:

@@ -1,5 +1,5 @@
-"""The valley test (a crease at the scale of a centimetre), the hand-back of valley faces and the
-split of a region that a wider valley cuts in two."""
+"""The valley test (a crease at the scale of a few edge lengths), the hand-back of valley faces and
+the split of a region that a wider valley cuts in two."""
 
 from __future__ import annotations
 
@@ -12,9 +12,12 @@ from segment_fixtures import height_field
 
 from stockpile_ros.segment.adjacency import FaceAdjacency, face_geometry
 from stockpile_ros.segment.segmentation import (
+    MAX_SMOOTHING_PASSES,
     SegmentParams,
     hand_back,
+    median_edge,
     segment_mesh,
+    smoothing_passes,
     split_at_valleys,
     valley_depths,
 )
@@ -26,12 +29,18 @@ def _domes(x: F64, y: F64) -> F64:
     """Two 5 cm domes 9 cm apart, their crease rounded over about a centimetre (a soft max)."""
     radius, rounding = 0.05, 0.01
     d = [np.sqrt(np.maximum(radius**2 - (x - cx) ** 2 - y**2, 0.0)) for cx in (-0.045, 0.045)]
-    return np.asarray(rounding * np.logaddexp(d[0] / rounding, d[1] / rounding))
+    # The soft max of two zeros is rounding * log 2: taken off, the ground lies at z = 0.
+    soft = rounding * (np.logaddexp(d[0] / rounding, d[1] / rounding) - np.log(2.0))
+    return np.asarray(soft)
+
+
+# The domes are the rocks of interest: 10 cm across.
+DOMES = SegmentParams(min_rock_b=0.1)
 
 
 def _valley_area_near(v: F64, f: npt.NDArray[np.int64], x0: float) -> tuple[float, float]:
     geom = face_geometry(v, f)
-    valley = valley_depths(v, f, geom, [0.0075])[0] > 0.0005
+    valley = valley_depths(v, f, geom, [0.0075], median_edge(v, f))[0] > 0.0005
     near = np.abs(geom.centroids[:, 0] - x0) < 0.01
     return float(geom.areas[valley & near].sum()), float(geom.areas[valley & ~near].sum())
 
@@ -61,24 +70,40 @@ def test_hand_back_splits_a_band_where_the_fronts_meet() -> None:
 
 def test_the_search_stops_at_a_rounded_crease() -> None:
     v, f = height_field(_domes, 0.1, 161)
-    seg = segment_mesh(v, f)
+    seg = segment_mesh(v, f, DOMES)
     assert seg.raw_regions == 2
     xy = seg.geometry.centroids[:, :2]
     tops = [np.argmin(np.linalg.norm(xy - [x, 0.0], axis=1)) for x in (-0.045, 0.045)]
     assert seg.labels[tops[0]] != seg.labels[tops[1]]
     assert min(seg.labels[tops]) > 0
     # Valley faces went back to the domes: all that is left unlabelled is ground.
-    assert np.all(seg.geometry.centroids[seg.labels == 0, 2] < SegmentParams().ground_tolerance)
+    ground = SegmentParams().ground_tolerance_edges * seg.scale.edge
+    assert np.all(seg.geometry.centroids[seg.labels == 0, 2] < ground)
     # Without the valley test the face-to-face criterion alone breaks the same mesh into pieces.
-    assert segment_mesh(v, f, replace(SegmentParams(), valley_depth=0.0)).raw_regions > 2
+    assert segment_mesh(v, f, replace(DOMES, valley_depth_ratio=0.0)).raw_regions > 2
 
 
 def test_depths_at_several_scales_match_one_scale_at_a_time() -> None:
     v, f = height_field(_domes, 0.1, 81)
     geom = face_geometry(v, f)
-    both = valley_depths(v, f, geom, [0.015, 0.0075])
+    edge = median_edge(v, f)
+    both = valley_depths(v, f, geom, [0.015, 0.0075], edge)
     for radius, depth in zip([0.015, 0.0075], both, strict=True):
-        np.testing.assert_allclose(depth, valley_depths(v, f, geom, [radius])[0])
+        np.testing.assert_allclose(depth, valley_depths(v, f, geom, [radius], edge)[0])
+
+
+def test_a_tiny_or_degenerate_edge_cannot_make_the_smoothing_run_for_ever() -> None:
+    assert smoothing_passes(0.0075, 0.0025) == 18
+    assert smoothing_passes(0.0, 0.0025) == 1
+    for edge in (1e-9, 1e-200, 0.0):
+        assert smoothing_passes(1.0, edge) == MAX_SMOOTHING_PASSES
+    # A radius of a billion edge lengths (2e18 rounds uncapped) on a small mesh comes back, after
+    # the capped number of rounds: deep in the valley, level far from it.
+    v, f = height_field(lambda x, y: 0.3 * np.abs(x), 0.1, 21)
+    (depth,) = valley_depths(v, f, face_geometry(v, f), [1e9 * 0.01], 0.01)
+    assert np.all(np.isfinite(depth))
+    centre = np.abs(face_geometry(v, f).centroids[:, 0]) < 0.01
+    assert depth[centre].mean() > 0
 
 
 def test_a_region_cut_by_a_valley_into_two_large_parts_is_split() -> None:
@@ -114,10 +139,13 @@ def test_split_faces_go_back_to_their_own_region_only() -> None:
 def test_two_domes_in_one_region_are_split_at_the_crease_between_them() -> None:
     v, f = height_field(_domes, 0.1, 161)
     geom = face_geometry(v, f)
-    params = SegmentParams()
-    labels = np.where(geom.centroids[:, 2] > params.ground_tolerance, 1, 0).astype(np.int32)
-    deep = valley_depths(v, f, geom, [params.split_radius])[0] > params.split_depth
-    seg = segment_mesh(v, f)
+    params = DOMES
+    seg = segment_mesh(v, f, params)
+    edge = seg.scale.edge
+    ground = params.ground_tolerance_edges * edge
+    labels = np.where(geom.centroids[:, 2] > ground, 1, 0).astype(np.int32)
+    radius = params.split_radius_b * seg.scale.min_rock_b
+    deep = valley_depths(v, f, geom, [radius], edge)[0] > params.split_depth_ratio * radius
     split = split_at_valleys(labels, seg.adjacency, geom.areas, deep, params.split_min_share)
     xy = geom.centroids[:, :2]
     tops = [np.argmin(np.linalg.norm(xy - [x, 0.0], axis=1)) for x in (-0.045, 0.045)]

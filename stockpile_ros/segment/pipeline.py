@@ -99,7 +99,7 @@ def analyse_mesh(
     sp = seg_params or SegmentParams()
     mp = measure_params or MeasureParams()
     t0 = time.perf_counter()
-    seg = segment_mesh(v, f, sp)
+    seg = segment_mesh(v, f, sp, spec)
     t1 = time.perf_counter()
     rocks = measure_rocks(v, seg, mp)
     grad = gradation([r.b for r in rocks], [r.mass for r in rocks], 'b', spec)
@@ -115,6 +115,7 @@ def analyse_mesh(
         'gradation': grad,
         'segmentation': {
             **sp.as_dict(),
+            'scale': seg.scale.as_dict(),
             'raw_regions': seg.raw_regions,
             'segments': int(seg.labels.max()) if len(seg.labels) else 0,
             'rocks_measured': len(rocks),

@@ -5,28 +5,38 @@ Two presets of :class:`SegmentParams`:
 * ``paper``: the published rule as written: face normals, ``t = 0.7``, seeds in face order, restarts
   until the mesh is covered, nothing removed or merged. Every region is reported, however small.
 * ``default``: what measured best against ground truth on reconstructed simulator piles: every face
-  within 1 cm of the ground plane that does not face down is ground and is excluded first (Poisson
-  rounds the foot of each rock into a skirt that the search would otherwise take into the rock:
-  10-27 % of a rock's area on one pile); faces in a concave valley at the scale of a centimetre
-  are kept out of the search too (see ``valley_depths``: where two rocks touch, Poisson bridges the
-  crevice with a surface that is smooth face to face, and the search leaked through it: on seven
-  piles, 21 of its regions had under 85 % of their area on a single rock); ``t = 0.93``
-  (stricter than the paper's 0.7 and the authors' code's 0.81: Poisson rounds contact creases,
-  and a looser test merges touching rocks); seeds from the most convex faces; every region under
-  1 % of the searched faces is a fragment and is merged into the neighbouring region it shares
-  the longest border with; the valley faces are handed back to the regions they border, growing
-  from both sides of a valley until they meet; then neighbouring regions whose union stays
-  convex across their shared border are joined (on reconstructed piles, noise stops the search
-  inside single rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on
-  another, see ``merge_convex_borders``); last, a region that a wider valley (at the scale of
-  1.5 cm) cuts into two or more large parts is split into them (two touching rocks that the
-  search joined through a gap in the centimetre valley, see ``split_at_valleys``).
+  within a few edge lengths of the ground plane that does not face down is ground and is excluded
+  first (Poisson rounds the foot of each rock into a skirt that the search would otherwise take
+  into the rock: 10-27 % of a rock's area on one pile); faces in a concave valley at the scale of a
+  few edge lengths are kept out of the search too (see ``valley_depths``: where two rocks touch,
+  Poisson bridges the crevice with a surface that is smooth face to face, and the search leaked
+  through it: on seven piles, 21 of its regions had under 85 % of their area on a single rock);
+  ``t = 0.93`` (stricter than the paper's 0.7 and the authors' code's 0.81: Poisson rounds contact
+  creases, and a looser test merges touching rocks); seeds from the most convex faces; every
+  region smaller than a share of the smallest rock of interest is a fragment and is merged into
+  the neighbouring region it shares the longest border with; the valley faces are handed back to
+  the regions they border, growing from both sides of a valley until they meet; then neighbouring
+  regions whose union stays convex across their shared border are joined (on reconstructed piles,
+  noise stops the search inside single rocks: this took precision from 0.38 to 1.0 on one and from
+  0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region that a wider valley cuts
+  into two or more large parts is split into them (two touching rocks that the search joined
+  through a gap in the narrower valley, see ``split_at_valleys``).
+
+Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
+meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
+cells high, so the ground tolerance is a multiple of the mesh's median edge length. What is a
+rock and what a fragment, and how wide the crevices between rocks are, depend on the smallest
+rock of interest, ``min_rock_b`` (given, from the class being checked, or a number of edge
+lengths, see :func:`rock_scale`): the fragment area and the valley scales are in its units, and
+the valley depths are shares of their scale (a crease angle, not a length). Nothing depends on
+the size of the whole pile.
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Annotated, Any, Literal
 
@@ -44,12 +54,19 @@ from .region import grow_regions
 F64 = npt.NDArray[np.float64]
 
 __all__ = [
+    'MAX_SMOOTHING_PASSES',
+    'RESOLVABLE_EDGES',
+    'RockScale',
     'SegmentParams',
     'Segmentation',
+    'class_min_rock_b',
     'hand_back',
+    'median_edge',
     'merge_convex_borders',
     'merge_fragments',
+    'rock_scale',
     'segment_mesh',
+    'smoothing_passes',
     'split_at_valleys',
     'valley_depths',
 ]
@@ -57,12 +74,25 @@ __all__ = [
 Mode = Literal['paper', 'default']
 BORDER_SAMPLES = 256
 HULL_SAMPLES = 2000
+#: Most faces whose edges give the median edge length (an even stride of the mesh's).
+EDGE_SAMPLES = 65536
 I32 = npt.NDArray[np.int32]
+#: Most rounds of Laplacian smoothing ``valley_depths`` runs (a radius of 32 edge lengths): a
+#: degenerate mesh (a tiny median edge) or a large rock of interest on a fine mesh cannot make it
+#: run for ever.
+MAX_SMOOTHING_PASSES = 2 * 32**2
+#: A rock under this many median edge lengths across cannot be told from mesh noise: the smallest
+#: rock of interest is never taken smaller.
+RESOLVABLE_EDGES = 4.0
+#: When a class is checked, the smallest rock of interest is this share of the smallest size the
+#: class names (the lower limit of its D15): the rocks under D15 carry 15 % of the mass and must
+#: be counted for D15 to come out right.
+CLASS_MIN_SHARE = 0.5
 
 
 @dataclass(frozen=True)
 class SegmentParams:
-    """Every knob of the segmentation. Paper values in brackets.
+    """Every knob of the segmentation. Paper values in brackets; each length says its unit.
 
     Attributes:
         mode: Name of the preset these values came from. As a parameter: the preset that gives
@@ -77,38 +107,61 @@ class SegmentParams:
             before the test [0].
         exclude_ground: Give faces on the ground plane label 0 and keep them out of the search [no;
             the authors removed the ground by hand].
-        ground_tolerance: Height above ``z = 0`` under which a face is ground [m].
+        min_rock_b: Intermediate dimension b of the smallest rock of interest [m]; 0: half the
+            smallest size of the class being checked (the lower limit of its D15) when a class is
+            checked, else ``min_rock_edges`` median edge lengths. Never taken under
+            ``RESOLVABLE_EDGES`` (4) edge lengths.
+        min_rock_edges: The smallest rock of interest when neither ``min_rock_b`` nor a class
+            gives it [in median edge lengths].
+        ground_tolerance_edges: Height above ``z = 0`` under which a face is ground [in median
+            edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
+            a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
+            bench/bench_scale.py's piles)].
         ground_min_nz: Smallest normal z component of a ground face (0: any face that does not
             face down; the skirt Poisson puts round the foot of a rock slopes).
-        min_region_fraction: Regions under this share of the searched faces are fragments [0; the
-            authors' code dropped regions under 1 %].
-        min_region_faces: Regions under this many faces are fragments as well [0].
+        min_region_share: Regions of less area than this share of the plan area of the smallest
+            rock of interest (a disc of diameter ``min_rock_b``) are fragments; 0 keeps every
+            region [in units of ``pi / 4 min_rock_b^2``] [0; the authors' code dropped regions
+            under 1 % of all faces, a rule that caps a pile at about 100 rocks]. 0.25 is a disc
+            half as wide as the smallest rock: a rock is seen on more than its plan area, but a
+            partly hidden one on less. On bench/bench_scale.py's coarse pile (150 rocks of 11-22
+            edge lengths across) discs of 10 to 20 edge lengths across lost no rock, discs of 28
+            and 30 lost 32 and 45; with 10 to 20, precision stayed at 0.976 or more on every pile.
         merge_fragments: Merge fragments into the neighbouring region they share the most edges
             with; when off, or when a fragment has no neighbour, it gets label 0 [off].
         merge_convex: After the fragment merge, join neighbouring regions whose union is convex
             across their shared border (see ``merge_convex_borders``) [off]: on a
             reconstructed mesh, noise stops the search inside single rocks.
         border_depth: Largest median depth of the shared border under the convex hull of the
-            union (along the border's outward normal), over the square root of the smaller
-            region's area, for a join. On four reconstructed piles 0.12 joined every split rock
-            and no touching rocks; 0.16 began to join touching rocks, 0.05 left splits.
+            union (along the border's outward normal), for a join [in units of the square root
+            of the smaller region's area]. On four reconstructed piles 0.12 joined every split
+            rock and no touching rocks; 0.16 began to join touching rocks, 0.05 left splits.
         border_min_edges: Borders shorter than this many face edges are never joined (a corner
             contact says little about the surface between the regions).
-        valley_depth: Faces whose vertices lie deeper than this under their smoothed surroundings
-            are valley faces, kept out of the search and handed back to the regions they border
-            afterwards; 0 disables [m] [0]. On seven reconstructed piles (79 matched rocks) 0.5 mm
-            took recall from 0.86 to 0.90, the median b error from 7.0 % to 5.4 % and the mean
-            D50 error from 9.8 % to 4.3 %; 0.3 mm and 0.7 mm did worse on b or D50.
-        valley_radius: Scale of the smoothed surroundings: the standard deviation of the
-            smoothing kernel [m]. 5 mm and 10 mm measured about as well as 7.5 mm.
-        split_depth: Faces deeper than this under their surroundings at the scale
-            ``split_radius`` cut a region; where they cut it into two or more parts of at least
-            ``split_min_share`` of its area each, the parts become regions of their own (see
-            ``split_at_valleys``); 0 disables [m] [0]. On twelve reconstructed piles 1 mm split
-            one region, two touching rocks joined through a gap in the centimetre valley (recall
-            0.905 -> 0.912, median b error 5.1 % -> 4.8 %, worst D50 error 16.4 % -> 6.9 %);
-            0.8 mm and 1.3 mm measured the same or better, 0.6 mm began to split single rocks.
-        split_radius: Scale of the surroundings for ``split_depth`` [m].
+        valley_depth_ratio: Faces whose vertices lie deeper than this under their smoothed
+            surroundings are valley faces, kept out of the search and handed back to the regions
+            they border afterwards; 0 disables [in units of the valley radius, a crease angle:
+            0.067 is the 0.5 mm at 7.5 mm measured on reconstructed piles] [0]. On seven
+            reconstructed piles (79 matched rocks) 0.5 mm took recall from 0.86 to 0.90, the
+            median b error from 7.0 % to 5.4 % and the mean D50 error from 9.8 % to 4.3 %; 0.3 mm
+            and 0.7 mm did worse on b or D50.
+        valley_radius_b: Scale of the smoothed surroundings: the standard deviation of the
+            smoothing kernel [in units of ``min_rock_b``; on reconstructed piles (depth-9 meshes,
+            4-5 mm edges) 7.5 mm, about 1.5 edge lengths, measured as well as 5 and 10 mm: 0.075
+            keeps it there when ``min_rock_b`` comes from the mesh]. A crease is only seen at a
+            scale wider than the rounding Poisson gave it, and the crevices between larger rocks
+            are wider.
+        split_depth_ratio: Faces deeper than this under their surroundings at the scale
+            ``split_radius_b`` cut a region; where they cut it into two or more parts of at
+            least ``split_min_share`` of its area each, the parts become regions of their own (see
+            ``split_at_valleys``); 0 disables [in units of the split radius] [0]. On twelve
+            reconstructed piles 1 mm at 15 mm split one region, two touching rocks joined through
+            a gap in the narrower valley (recall 0.905 -> 0.912, median b error 5.1 % -> 4.8 %,
+            worst D50 error 16.4 % -> 6.9 %); 0.8 mm and 1.3 mm measured the same or better,
+            0.6 mm began to split single rocks.
+        split_radius_b: Scale of the surroundings for ``split_depth_ratio`` [in units of
+            ``min_rock_b``; 0.15 is the 15 mm (3 edge lengths) measured on reconstructed piles
+            when ``min_rock_b`` comes from the mesh].
         split_min_share: Smallest share of a region's area that a part needs to be split off
             (0.2 measured the same as 0.1).
 
@@ -119,18 +172,19 @@ class SegmentParams:
     seed_order: Literal['index', 'convex'] = 'convex'
     normal_smoothing: Annotated[int, Range(0, 100)] = 0
     exclude_ground: bool = True
-    ground_tolerance: Annotated[float, Range(0.0, 10.0)] = 0.01
+    min_rock_b: Annotated[float, Range(0.0, 100.0)] = 0.0
+    min_rock_edges: Annotated[float, Range(RESOLVABLE_EDGES, 10_000.0)] = 20.0
+    ground_tolerance_edges: Annotated[float, Range(0.0, 1000.0)] = 2.0
     ground_min_nz: Annotated[float, Range(0.0, 1.0)] = 0.0
-    min_region_fraction: Annotated[float, Range(0.0, 1.0)] = 0.01
-    min_region_faces: Annotated[int, Range(0, 100_000_000)] = 30
+    min_region_share: Annotated[float, Range(0.0, 100.0)] = 0.25
     merge_fragments: bool = True
     merge_convex: bool = True
     border_depth: Annotated[float, Range(0.0, 10.0)] = 0.12
     border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
-    valley_depth: Annotated[float, Range(0.0, 1.0)] = 0.0005
-    valley_radius: Annotated[float, Range(1e-4, 1.0)] = 0.0075
-    split_depth: Annotated[float, Range(0.0, 1.0)] = 0.001
-    split_radius: Annotated[float, Range(1e-4, 1.0)] = 0.015
+    valley_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
+    valley_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.075
+    split_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
+    split_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.15
     split_min_share: Annotated[float, Range(0.0, 0.5)] = 0.1
 
     @classmethod
@@ -142,12 +196,11 @@ class SegmentParams:
             seed_order='index',
             normal_smoothing=0,
             exclude_ground=False,
-            min_region_fraction=0.0,
-            min_region_faces=0,
+            min_region_share=0.0,
             merge_fragments=False,
             merge_convex=False,
-            valley_depth=0.0,
-            split_depth=0.0,
+            valley_depth_ratio=0.0,
+            split_depth_ratio=0.0,
         )
 
     @classmethod
@@ -155,6 +208,26 @@ class SegmentParams:
         """Return the ``mode`` preset with some fields replaced (``None`` values are ignored)."""
         base = cls.paper() if mode == 'paper' else cls()
         return replace(base, **{k: v for k, v in overrides.items() if v is not None})
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict for report.json."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RockScale:
+    """The lengths a segmentation was measured against.
+
+    Attributes:
+        edge: Median edge length of the mesh [m] (0 when every edge is degenerate).
+        min_rock_b: Intermediate dimension b of the smallest rock of interest [m].
+        source: Where ``min_rock_b`` came from: ``"parameter"``, ``"class"`` or ``"mesh"``.
+
+    """
+
+    edge: float
+    min_rock_b: float
+    source: Literal['parameter', 'class', 'mesh']
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict for report.json."""
@@ -174,6 +247,8 @@ class Segmentation:
             the normals actually used; False where an end is excluded ground).
         raw_regions: Number of regions the search itself produced, before any clean-up.
         params: The parameters used.
+        scale: The mesh's edge length and the smallest rock of interest the lengths of ``params``
+            are multiples of.
 
     """
 
@@ -184,6 +259,59 @@ class Segmentation:
     passing: npt.NDArray[np.bool_]
     raw_regions: int
     params: SegmentParams
+    scale: RockScale
+
+
+def median_edge(vertices: F64, faces: npt.NDArray[np.int64]) -> float:
+    """Median length of the mesh's face edges, degenerate (zero-length) edges left out [m].
+
+    Returns:
+        The median, 0 when the mesh has no edge of non-zero length.
+
+    """
+    # An even stride of faces gives the median of a million-face mesh to a fraction of a percent
+    # at a small share of the cost; the same faces are picked whatever the mesh's size in metres.
+    tri = vertices[faces[:: max(1, -(-len(faces) // EDGE_SAMPLES))]]
+    length = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).ravel()
+    length = length[length > 0]
+    return float(np.median(length)) if len(length) else 0.0
+
+
+def class_min_rock_b(spec: Mapping[str, Any]) -> float | None:
+    """Smallest rock of interest for checking a class: half its smallest lower size limit.
+
+    Args:
+        spec: A class entry of the class table (``limits`` in metres, see ``check_class``).
+
+    Returns:
+        ``CLASS_MIN_SHARE`` times the smallest lower limit [m], None when the class has none.
+
+    """
+    lows = [float(lo) for lo, _ in spec.get('limits', {}).values() if lo is not None]
+    return CLASS_MIN_SHARE * min(lows) if lows else None
+
+
+def rock_scale(
+    params: SegmentParams, edge: float, spec: Mapping[str, Any] | None = None
+) -> RockScale:
+    """Return the smallest rock of interest: ``min_rock_b``, else the class's, else the mesh's.
+
+    Args:
+        params: ``min_rock_b`` (0: not given) and ``min_rock_edges``.
+        edge: The mesh's median edge length [m].
+        spec: The class being checked, or None.
+
+    Returns:
+        The scale; ``min_rock_b`` is never under ``RESOLVABLE_EDGES`` edge lengths.
+
+    """
+    floor = RESOLVABLE_EDGES * edge
+    if params.min_rock_b > 0:
+        return RockScale(edge, max(params.min_rock_b, floor), 'parameter')
+    from_class = class_min_rock_b(spec) if spec is not None else None
+    if from_class is not None:
+        return RockScale(edge, max(from_class, floor), 'class')
+    return RockScale(edge, params.min_rock_edges * edge, 'mesh')
 
 
 def _smooth_normals(geom: FaceGeometry, adj: FaceAdjacency, rounds: int) -> npt.NDArray[np.float64]:
@@ -199,24 +327,42 @@ def _smooth_normals(geom: FaceGeometry, adj: FaceAdjacency, rounds: int) -> npt.
     return normals
 
 
+def smoothing_passes(radius: float, edge: float) -> int:
+    """Return the rounds of uniform Laplacian smoothing that spread a vertex over ``radius``.
+
+    ``k`` rounds over edges of length ``edge`` spread a vertex with a standard deviation of about
+    ``edge sqrt(k / 2)``, so ``k = 2 (radius / edge)^2``, at least 1 and at most
+    ``MAX_SMOOTHING_PASSES`` (a zero or tiny ``edge`` gives the most).
+    """
+    # The ratio is compared before it is squared: the square of a huge ratio overflows.
+    ratio = radius / edge if edge > 0 else math.inf
+    if ratio >= math.sqrt(MAX_SMOOTHING_PASSES / 2.0):
+        return MAX_SMOOTHING_PASSES
+    return max(1, round(2.0 * ratio**2))
+
+
 def valley_depths(
-    vertices: F64, faces: npt.NDArray[np.int64], geom: FaceGeometry, radii: Sequence[float]
+    vertices: F64,
+    faces: npt.NDArray[np.int64],
+    geom: FaceGeometry,
+    radii: Sequence[float],
+    edge: float,
 ) -> list[F64]:
     """Depth of each face under its smoothed surroundings, at each scale in ``radii``.
 
     Each vertex is compared with the average of its neighbourhood, found by rounds of uniform
-    Laplacian smoothing: ``k`` rounds over edges of median length ``e`` spread a vertex with a
-    standard deviation of about ``e sqrt(k / 2)``, so ``k = 2 (radius / e)^2``. The depth of a
-    vertex is how far its smoothed position lies above it along its normal (positive in a valley,
-    negative on a crest); a face's is the mean of its vertices'. Unlike Eq. 2, which compares
-    neighbouring faces only, this sees a crease that Poisson spread over several faces. The
-    smoothing runs once, up to the largest radius, and is read off at each smaller one on the way.
+    Laplacian smoothing (see ``smoothing_passes``). The depth of a vertex is how far its smoothed
+    position lies above it along its normal (positive in a valley, negative on a crest); a face's
+    is the mean of its vertices'. Unlike Eq. 2, which compares neighbouring faces only, this sees
+    a crease that Poisson spread over several faces. The smoothing runs once, up to the largest
+    radius, and is read off at each smaller one on the way.
 
     Args:
         vertices: Nx3 vertex positions [m].
         faces: Mx3 triangles.
         geom: Face normals and areas (the vertex normals are their area-weighted means).
         radii: Scales of the neighbourhood [m].
+        edge: Median edge length of the mesh [m] (see ``median_edge``).
 
     Returns:
         Per face depths [m], one array per radius, in the order of ``radii``.
@@ -231,17 +377,19 @@ def valley_depths(
     ).astype(np.float64)
     vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
     b = faces[:, [1, 2, 0]].ravel()
-    edge = max(float(np.median(np.linalg.norm(vertices[a] - vertices[b], axis=1))), 1e-12)
     # An interior edge comes once from each of its faces: the matrix only marks neighbours.
     link = sparse.csr_matrix(
         (np.ones(2 * len(a)), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n, n)
     )
-    link.data[:] = 1.0
-    step = sparse.diags(1.0 / np.maximum(np.asarray(link.sum(axis=1)).ravel(), 1.0)) @ link
+    # Each row divided by its count of neighbours, in place (a product with a diagonal matrix
+    # would build the matrix again).
+    degree = np.diff(link.indptr)
+    link.data[:] = np.repeat(1.0 / np.maximum(degree, 1), degree)
+    step = link
     smooth, done = vertices, 0
     out: dict[int, F64] = {}
     for k in sorted(range(len(radii)), key=lambda k: radii[k]):
-        for _ in range(max(1, round(2.0 * (radii[k] / edge) ** 2)) - done):
+        for _ in range(smoothing_passes(radii[k], edge) - done):
             smooth = step @ smooth
             done += 1
         deep = np.einsum('ij,ij->i', smooth - vertices, vn)
@@ -268,19 +416,32 @@ def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I
         src, dst = src[left], dst[left]
 
 
-def merge_fragments(labels: I32, adj: FaceAdjacency, min_faces: int, merge: bool) -> I32:
-    """Merge regions under ``min_faces`` faces into the neighbour they share most edges with.
+def merge_fragments(
+    labels: I32, adj: FaceAdjacency, areas: F64, min_area: float, merge: bool
+) -> I32:
+    """Merge regions of less area than ``min_area`` into the neighbour they share most edges with.
 
-    A fragment only moves into a neighbour that ranks higher by (face count, id), so merges never
-    cycle and the lowest-ranked fragment always moves: each round makes progress. Fragments with no
+    A fragment only moves into a neighbour that ranks higher by (area, id), so merges never cycle
+    and the lowest-ranked fragment always moves: each round makes progress. Fragments with no
     labelled neighbour (all fragments when ``merge`` is off) get label 0.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        areas: Face areas.
+        min_area: Regions under this area are fragments.
+        merge: Whether fragments are merged (else they get label 0).
+
+    Returns:
+        The labels, fragments merged or cleared.
+
     """
     labels = labels.copy()
-    if min_faces <= 1:
+    if min_area <= 0:
         return labels
     while True:
-        sizes = np.bincount(labels, minlength=int(labels.max()) + 1)
-        small = (sizes < min_faces) & (sizes > 0)
+        sizes = np.bincount(labels, weights=areas, minlength=int(labels.max()) + 1)
+        small = (sizes < min_area) & (np.bincount(labels, minlength=len(sizes)) > 0)
         small[0] = False
         if not small.any():
             return labels
@@ -312,9 +473,12 @@ def merge_fragments(labels: I32, adj: FaceAdjacency, min_faces: int, merge: bool
 def _hull_points(points: F64) -> F64:
     """Return up to ``HULL_SAMPLES`` vertices of the convex hull of ``points``, evenly strided.
 
-    On a smooth rock nearly every vertex is a hull vertex; a strided sample of them puts the hull
-    within a fraction of an edge length of the full one at a small share of the cost.
+    On a smooth rock nearly every vertex is a hull vertex, and Qhull's cost grows with the hull's
+    size: the hull is taken of an even stride of at most ``2 HULL_SAMPLES`` points, and a strided
+    sample of its vertices is returned. Both put the hull within a fraction of an edge length of
+    the full one at a small share of the cost.
     """
+    points = points[:: -(-len(points) // (2 * HULL_SAMPLES))]
     with contextlib.suppress(QhullError, ValueError):
         points = points[ConvexHull(points).vertices]
     return points[:: -(-len(points) // HULL_SAMPLES)]
@@ -375,11 +539,16 @@ def merge_convex_borders(
     order = np.argsort(labels, kind='stable')
     bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
     hulls: dict[int, F64] = {}
+    used = np.zeros(len(vertices), dtype=bool)
 
     def hull_of(region: int) -> F64:
         if region not in hulls:
+            # The region's vertices in index order, as np.unique gives them, without a sort.
             tri = faces[order[bounds[region] : bounds[region + 1]]]
-            hulls[region] = _hull_points(vertices[np.unique(tri)])
+            used[tri] = True
+            ids = np.flatnonzero(used)
+            used[ids] = False
+            hulls[region] = _hull_points(vertices[ids])
         return hulls[region]
 
     while True:
@@ -446,7 +615,9 @@ def split_at_valleys(
     part_area = np.bincount(part[solid], weights=areas[solid], minlength=m)
     region_area = np.bincount(labels, weights=areas)
     big = solid & (part_area[part] >= min_share * region_area[labels])
-    regions = np.unique(np.stack([labels[big], part[big]], axis=1), axis=0)[:, 0]
+    # One key per (region, part) pair: a 1-D unique sorts far faster than rows of pairs.
+    pairs = np.unique(labels[big].astype(np.int64) * m + part[big])
+    regions = pairs // m
     split = np.bincount(regions, minlength=len(region_area)) >= 2
     split[0] = False
     if not split.any():
@@ -470,7 +641,10 @@ def _renumber_by_size(labels: I32) -> I32:
 
 
 def segment_mesh(
-    vertices: npt.ArrayLike, faces: npt.ArrayLike, params: SegmentParams | None = None
+    vertices: npt.ArrayLike,
+    faces: npt.ArrayLike,
+    params: SegmentParams | None = None,
+    spec: Mapping[str, Any] | None = None,
 ) -> Segmentation:
     """Segment a stockpile mesh (stockpile frame: z up, ground at ``z = 0``) into rocks.
 
@@ -478,6 +652,8 @@ def segment_mesh(
         vertices: Nx3 vertex positions.
         faces: Mx3 triangles, outward normals by the right-hand rule.
         params: Parameters; the ``default`` preset if None.
+        spec: The class the gradation will be checked against, or None: when ``min_rock_b`` is
+            0 it sets the smallest rock of interest (see ``rock_scale``).
 
     Returns:
         The per-face labels and what they were computed from.
@@ -489,18 +665,25 @@ def segment_mesh(
     geom = face_geometry(v, f)
     adj = face_adjacency(f, len(v))
     m = len(f)
+    scale = rock_scale(p, median_edge(v, f) if m else 0.0, spec)
+    edge = scale.edge
     normals = _smooth_normals(geom, adj, p.normal_smoothing)
     active = np.ones(m, dtype=bool)
     if p.exclude_ground:
-        ground = (geom.centroids[:, 2] < p.ground_tolerance) & (normals[:, 2] >= p.ground_min_nz)
+        ground = (geom.centroids[:, 2] < p.ground_tolerance_edges * edge) & (
+            normals[:, 2] >= p.ground_min_nz
+        )
         active &= ~ground
-    # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's.
-    scales = ((p.valley_radius, p.valley_depth), (p.split_radius, p.split_depth))
-    radii = [r for r, d in scales if d > 0]
-    depths = valley_depths(v, f, geom, radii) if radii else []
+    # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's. A
+    # mesh without a length (every edge degenerate) has no scale to look for valleys at.
+    valley_radius = p.valley_radius_b * scale.min_rock_b
+    split_radius = p.split_radius_b * scale.min_rock_b
+    scales = ((valley_radius, p.valley_depth_ratio), (split_radius, p.split_depth_ratio))
+    radii = [r for r, d in scales if d > 0 and edge > 0]
+    depths = valley_depths(v, f, geom, radii, edge) if radii else []
     valley = np.zeros(m, dtype=bool)
-    if p.valley_depth > 0:
-        valley = (depths[0] > p.valley_depth) & active
+    if p.valley_depth_ratio > 0 and depths:
+        valley = (depths[0] > p.valley_depth_ratio * valley_radius) & active
         active &= ~valley
     if active.all():
         search = adj
@@ -529,9 +712,9 @@ def segment_mesh(
     dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
     labels = grow_regions(m, src, dst, seeds)
     raw = int(labels.max()) if m else 0
-    min_faces = max(p.min_region_faces, int(np.ceil(p.min_region_fraction * int(active.sum()))))
-    if min_faces > 1:
-        labels = merge_fragments(labels, search, min_faces, p.merge_fragments)
+    min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
+    if min_area > 0:
+        labels = merge_fragments(labels, search, geom.areas, min_area, p.merge_fragments)
     if valley.any():
         labels = hand_back(labels, adj, valley)
         search = adj
@@ -539,8 +722,7 @@ def segment_mesh(
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
         )
-    if p.split_depth > 0:
-        labels = split_at_valleys(
-            labels, adj, geom.areas, depths[-1] > p.split_depth, p.split_min_share
-        )
-    return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p)
+    if p.split_depth_ratio > 0 and depths:
+        deep = depths[-1] > p.split_depth_ratio * split_radius
+        labels = split_at_valleys(labels, adj, geom.areas, deep, p.split_min_share)
+    return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale)

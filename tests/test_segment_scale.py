@@ -1,0 +1,153 @@
+"""Rules that scale: every length of the default mode is in edge lengths or in the smallest rock."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from segment_fixtures import height_field, small_pile
+
+from stockpile_ros.segment.adjacency import FaceAdjacency
+from stockpile_ros.segment.gradation import load_class_table
+from stockpile_ros.segment.measure import measure_rocks
+from stockpile_ros.segment.segmentation import (
+    RESOLVABLE_EDGES,
+    SegmentParams,
+    class_min_rock_b,
+    median_edge,
+    merge_fragments,
+    rock_scale,
+    segment_mesh,
+)
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+def _subdivide(v: F64, f: I64) -> tuple[F64, I64, I64]:
+    """Split every triangle into four at its edge midpoints, shared by the faces on both sides.
+
+    Returns:
+        Vertices, faces and the parent face of each new face.
+
+    """
+    a, b, c = f[:, 0], f[:, 1], f[:, 2]
+    edges = np.stack([np.stack([a, b], 1), np.stack([b, c], 1), np.stack([c, a], 1)], axis=1)
+    key = np.sort(edges.reshape(-1, 2), axis=1)
+    uniq, inv = np.unique(key, axis=0, return_inverse=True)
+    mid = len(v) + inv.reshape(-1, 3)
+    verts = np.concatenate([v, 0.5 * (v[uniq[:, 0]] + v[uniq[:, 1]])])
+    ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+    faces = np.concatenate(
+        [np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+    )
+    return verts, faces, np.tile(np.arange(len(f)), 4)
+
+
+def _agreement(labels: npt.NDArray[np.int32], other: npt.NDArray[np.int32], w: F64) -> float:
+    """Share of the area where ``other`` agrees with ``labels`` after each label of ``labels`` is
+    matched to the label of ``other`` it overlaps most."""
+    n = int(other.max()) + 1
+    agree = 0.0
+    for k in np.unique(labels):
+        sel = labels == k
+        agree += float(np.bincount(other[sel], weights=w[sel], minlength=n).max())
+    return agree / float(w.sum())
+
+
+@pytest.mark.parametrize('factor', [0.1, 10.0])
+def test_a_scaled_pile_segments_and_measures_the_same(factor: float) -> None:
+    v, f, _ = small_pile()
+    base = segment_mesh(v, f)
+    scaled = segment_mesh(v * factor, f)
+    assert base.labels.max() >= 3
+    assert scaled.scale.edge == pytest.approx(factor * base.scale.edge, rel=1e-9)
+    # Labels are numbered by size, so equal segmentations have equal labels.
+    np.testing.assert_array_equal(scaled.labels, base.labels)
+    rocks, big = measure_rocks(v, base), measure_rocks(v * factor, scaled)
+    assert [r.id for r in big] == [r.id for r in rocks]
+    for r, s in zip(rocks, big, strict=True):
+        assert s.b == pytest.approx(factor * r.b, rel=1e-6)
+        assert s.mass == pytest.approx(factor**3 * r.mass, rel=1e-6)
+
+
+def test_a_subdivided_pile_segments_the_same_given_the_smallest_rock() -> None:
+    # Subdivision halves the median edge: the rock of interest is given in metres, and so the
+    # fragment area and the valley scales stay where they were.
+    v, f, _ = small_pile()
+    base = segment_mesh(v, f)
+    params = SegmentParams(min_rock_b=base.scale.min_rock_b)
+    v2, f2, parent = _subdivide(v, f)
+    fine = segment_mesh(v2, f2, params)
+    assert fine.scale.edge == pytest.approx(0.5 * base.scale.edge, rel=0.1)
+    assert fine.labels.max() == base.labels.max()
+    assert _agreement(base.labels[parent], fine.labels, fine.geometry.areas) > 0.97
+    rocks = {r.id: r for r in measure_rocks(v, base)}
+    for fine_rock in measure_rocks(v2, fine):
+        sel = fine.labels == fine_rock.id
+        overlap = np.bincount(base.labels[parent][sel], weights=fine.geometry.areas[sel])
+        match = int(overlap.argmax())
+        assert fine_rock.b == pytest.approx(rocks[match].b, rel=0.03)
+
+
+def _bumps(n: int, per: int) -> tuple[F64, I64]:
+    """``n`` x ``n`` touching spherical caps 1 m apart, ``per`` grid cells across each."""
+
+    def z(x: F64, y: F64) -> F64:
+        # A sphere of radius 0.6 m on each 1 m cell: neighbours meet in a crease at 0.33 m, the
+        # ground shows at the corners.
+        d2 = (x - np.floor(x) - 0.5) ** 2 + (y - np.floor(y) - 0.5) ** 2
+        return np.asarray(np.sqrt(np.maximum(0.36 - d2, 0.0)))
+
+    v, f = height_field(z, n / 2, n * per + 1)
+    v[:, :2] += n / 2
+    return v, f
+
+
+def test_hundreds_of_rocks_are_not_fragments_of_the_pile() -> None:
+    # 144 rocks, each under 1 % of the surface: a rule relative to the pile (regions under 1 % of
+    # the faces merged away) joined most of them; the smallest rock of interest does not.
+    v, f = _bumps(12, 32)
+    seg = segment_mesh(v, f)
+    assert seg.scale.source == 'mesh'
+    centres = np.stack(np.meshgrid(np.arange(12) + 0.5, np.arange(12) + 0.5), -1).reshape(-1, 2)
+    xy = seg.geometry.centroids[:, :2]
+    tops = [int(np.argmin(np.linalg.norm(xy - c, axis=1))) for c in centres]
+    assert len(set(seg.labels[tops].tolist())) == 144
+    assert seg.labels.max() == 144
+
+
+def test_the_smallest_rock_comes_from_the_parameter_the_class_or_the_mesh() -> None:
+    params = SegmentParams()
+    mesh = rock_scale(params, 0.005)
+    assert (mesh.source, mesh.min_rock_b) == ('mesh', pytest.approx(params.min_rock_edges * 0.005))
+    spec = load_class_table()['classes']['I']
+    # Class I: D15 at least 3.7 in; half of it.
+    assert class_min_rock_b(spec) == pytest.approx(0.5 * 3.7 * 0.0254)
+    from_class = rock_scale(params, 0.005, spec)
+    assert (from_class.source, from_class.min_rock_b) == ('class', pytest.approx(0.047, abs=1e-3))
+    given = rock_scale(replace(params, min_rock_b=0.3), 0.005, spec)
+    assert (given.source, given.min_rock_b) == ('parameter', 0.3)
+    # Never under what the mesh can resolve.
+    tiny = rock_scale(replace(params, min_rock_b=1e-4), 0.005)
+    assert tiny.min_rock_b == pytest.approx(RESOLVABLE_EDGES * 0.005)
+
+
+def test_fragments_are_judged_by_area_not_by_face_count() -> None:
+    # A strip of 10 faces: region 1 is 6 small faces (area 0.6), region 2 is 4 large ones (4.0).
+    adj = FaceAdjacency(10, np.arange(9), np.arange(1, 10))
+    labels = np.array([1] * 6 + [2] * 4, dtype=np.int32)
+    areas = np.array([0.1] * 6 + [1.0] * 4)
+    assert merge_fragments(labels, adj, areas, 1.0, True).tolist() == [2] * 10
+    assert merge_fragments(labels, adj, areas, 0.5, True).tolist() == labels.tolist()
+    assert merge_fragments(labels, adj, areas, 1.0, False).tolist() == [0] * 6 + [2] * 4
+
+
+def test_median_edge_leaves_degenerate_edges_out() -> None:
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0]], dtype=np.float64)
+    # The second face has two zero-length edges (vertices 0 and 3 coincide).
+    f = np.array([[0, 1, 2], [0, 3, 1]])
+    assert median_edge(v, f) == pytest.approx(1.0)
+    assert median_edge(np.zeros((3, 3)), np.array([[0, 1, 2]])) == 0.0
