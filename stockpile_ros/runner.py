@@ -14,13 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from .errors import CaptureError, StockpileError
-from .meshio import read_labelled_mesh
+from .meshcheck import read_mesh
 from .recon.keyframes import KeyframeStore
 from .recon.pipeline import WorkFolder, reconstruct
-from .segment.gradation import load_class_table
 from .segment.pipeline import Analysis, analyse_mesh
 from .segment.report import write_result_folder
-from .settings import Settings
+from .settings import Settings, class_spec
 
 __all__ = ['MIN_KEYFRAMES', 'RECON_STAGES', 'Outcome', 'run_reconstruction', 'run_segmentation']
 
@@ -130,22 +129,18 @@ def run_segmentation(
     out = Path(result_dir) if result_dir is not None else settings.work_dir / 'result'
     start = time.perf_counter()
     try:
-        mesh = read_labelled_mesh(mesh_dir / 'mesh.ply')
+        mesh, check = read_mesh(mesh_dir / 'mesh.ply')
         info = json.loads((mesh_dir / 'mesh.json').read_text())
-        spec = None
-        if settings.spec_class:
-            table = load_class_table(settings.class_table)
-            if settings.spec_class not in table['classes']:
-                known = ', '.join(table['classes'])
-                raise StockpileError(
-                    f'unknown class {settings.spec_class!r}; the class table has {known}'
-                )
-            spec = table['classes'][settings.spec_class]
+        spec = class_spec(settings)
         analysis = analyse_mesh(
             mesh.vertices, mesh.faces, mesh.colors,
             seg_params=settings.segment, measure_params=settings.measure,
             spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
         )  # fmt: skip
+        analysis.report['mesh']['check'] = check.as_dict()
+        if info['scale']['method'] != 'none':
+            # In model units (no scale) a size in metres says nothing.
+            analysis.report['warnings'][:0] = check.warnings
         write_result_folder(out, analysis, spec)
     except (json.JSONDecodeError, KeyError) as exc:
         return _failure('segment', StockpileError(f'{mesh_dir}: unreadable mesh: {exc}'), outcome)

@@ -49,6 +49,7 @@ __all__ = [
     'Settings',
     'build_settings',
     'check_value',
+    'class_spec',
     'defaults',
     'flatten',
     'get_setting',
@@ -244,7 +245,11 @@ def _table() -> tuple[Setting, ...]:
     rows += _from_dataclass('sfm', SfmOptions, rc)
     rows += _from_dataclass('dense', DenseOptions, rc)
     rows += _from_dataclass('poisson', PoissonOptions, rc)
-    rows += _from_dataclass('recon', ReconOptions, rc)
+    # The keyframe node reads two reconstruction options: whether odometry is used (its
+    # keyframes then wait for it) and how large an image may be.
+    shared = ('recon.use_odometry', 'recon.max_image_pixels')
+    rows += [dataclasses.replace(r, nodes=kf + rc) if r.name in shared else r
+             for r in _from_dataclass('recon', ReconOptions, rc)]  # fmt: skip
     rows += _from_dataclass('segment', SegmentParams, sg)
     rows += _from_dataclass('measure', MeasureParams, sg)
     return tuple(rows)
@@ -551,3 +556,14 @@ def write_effective(settings: Settings | Mapping[str, Any], folder: str | Path) 
     except OSError as exc:
         raise StockpileError(f'cannot write {path}: {exc.strerror or exc}') from exc
     return path
+
+
+def class_spec(settings: Settings) -> dict[str, Any] | None:
+    """Return the riprap class ``settings`` checks, from its class table; None when none.
+
+    :func:`build_settings` has checked that the table holds the class.
+    """
+    if not settings.spec_class:
+        return None
+    spec: dict[str, Any] = load_class_table(settings.class_table)['classes'][settings.spec_class]
+    return spec

@@ -362,11 +362,16 @@ def test_a_mesh_in_other_units_is_refused_unless_its_units_are_given(
     assert scaled['mesh']['check']['units'] == units
 
 
-def test_explicit_units_that_leave_the_mesh_too_fine_are_refused_not_hung(
+def test_explicit_units_on_an_implausibly_small_mesh_finish_and_warn(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    # Every length of the segmentation scales with the mesh's edges, so a mesh 1000 times too
+    # small in metres is cut as the right-sized one; the user said metres, and is warned.
     v, f, _ = small_pile()
     mesh = _ply(tmp_path / 'mesh.ply', v * 1e-3, f)
     argv = ['segment', str(mesh), '--out', str(tmp_path / 'r'), '--units', 'm']
     code, _, err, _ = _run(capsys, argv)
-    assert code == 2 and 'would not finish' in err and '--units' in err
+    assert code == 0 and 'implausible' in err
+    report = json.loads((tmp_path / 'r' / 'report.json').read_text())
+    assert not report['mesh']['check']['plausible']
+    assert any('implausible' in w for w in report['warnings'])

@@ -9,26 +9,27 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import StockpileError
-from ..meshcheck import UNITS, MeshCheck, read_mesh
-from ..segment.gradation import load_class_table
+from ..meshcheck import UNITS, read_mesh
 from ..segment.pipeline import analyse_mesh
 from ..segment.report import write_result_folder
-from ..segment.segmentation import SegmentParams
-from ..settings import write_effective
+from ..settings import class_spec, write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
 DESCRIPTION = """Segment a stockpile mesh (metric, z up, ground at z = 0) into rocks with the
-curvature
-search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass, sphericity...) and the
-pile's gradation, optionally check it against a riprap class, and write the result folder:
+curvature search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass,
+sphericity...) and the pile's gradation, optionally check it against a riprap class, and write the
+result folder:
 report.json, segments.ply, rocks.csv, gradation.png, render.png, index.html.
 
 Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" keeps the
-ground and centimetre-scale valleys out of the search, uses t = 0.93, seeds from convex faces,
-merges fragments under 1 % of the faces, hands the valley faces back to the rocks on either side
-and joins neighbouring regions whose union is convex across their shared border.
+ground and the valleys at the scale of the smallest rock of interest out of the search, uses
+t = 0.93, seeds from convex faces, merges fragments smaller than a share of the smallest rock of
+interest, hands the valley faces back to the rocks on either side and joins neighbouring regions
+whose union is convex across their shared border. Every length is in the mesh's median edge or in
+units of segment.min_rock_b (metres; by default half the checked class's smallest D15, else 20
+median edges), so a pile of gravel and one of riprap are cut by the same rules.
 
 Class tables: config/riprap_classes.yaml (NCHRP 568 classes I-X, by mass; the default) and
 config/fp14_riprap_classes.yaml (FHWA FP-14 classes 1-8, by count).
@@ -37,10 +38,6 @@ Parameters are those of the segmentation node (config/stockpile.yaml): --params 
 parameters file, --set NAME=VALUE sets one (e.g. --set measure.specific_gravity=2.7 --set
 measure.completion=hull). A segment value set explicitly wins over the preset of the mode. Every
 value is checked before the mesh is read, and the values used are written to OUT/params.yaml."""
-
-# Largest smoothing radius accepted, in median edge lengths of the mesh (about 2 * 50^2 = 5000
-# smoothing steps; a Poisson mesh at depth 10 of a 1 m pile has radius / edge near 15).
-_MAX_RADIUS_EDGES = 50
 
 # The convenience flags: each sets one table key, and only when it is given.
 _ALIASES = (
@@ -69,25 +66,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameter_arguments(parser, _ALIASES)
 
 
-def _smoothing_guard(check: MeshCheck, params: SegmentParams) -> None:
-    """Refuse a mesh far finer than the segmentation's smoothing radii.
-
-    The valley and split depths smooth the surface over their radius in steps of one edge, so
-    the work grows with (radius / edge)^2: a mesh in micrometres would never finish.
-    """
-    scales = (
-        (params.valley_radius, params.valley_depth),
-        (params.split_radius, params.split_depth),
-    )
-    radius = max((r for r, depth in scales if depth > 0), default=0.0)
-    if radius > _MAX_RADIUS_EDGES * check.median_edge_m:
-        raise StockpileError(
-            f'{check.source}: the median edge ({check.median_edge_m:.3g} m) is under '
-            f'1/{_MAX_RADIUS_EDGES} of the smoothing radius ({radius:g} m): the segmentation '
-            'would not finish; check the units (--units) or coarsen the mesh'
-        )
-
-
 def _read_info(path: Path | None) -> dict[str, Any] | None:
     if path is None:
         return None
@@ -109,14 +87,8 @@ def run(args: argparse.Namespace) -> int:
         raise StockpileError(
             f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
         )
-    _smoothing_guard(check, settings.segment)
     info = _read_info(args.mesh_info)
-    # build_settings has checked that the table holds the class.
-    spec = (
-        load_class_table(settings.class_table)['classes'][settings.spec_class]
-        if settings.spec_class
-        else None
-    )
+    spec = class_spec(settings)
     analysis = analyse_mesh(
         mesh.vertices, mesh.faces, mesh.colors,
         seg_params=settings.segment, measure_params=settings.measure,

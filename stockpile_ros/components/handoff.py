@@ -152,15 +152,15 @@ def _xyzw(q: Any) -> list[float]:
     return [float(q.x), float(q.y), float(q.z), float(q.w)]
 
 
-def read_keyframe(msg: Any) -> ReceivedKeyframe:
-    """Decode a ``Keyframe`` message (rosbags or rclpy).
+def read_keyframe(msg: Any, max_pixels: int) -> ReceivedKeyframe:
+    """Decode a ``Keyframe`` message (rosbags or rclpy); its image at most ``max_pixels``.
 
     Raises:
         ImageError: The image cannot be decoded.
         CameraInfoError: ``has_camera_info`` is set but the CameraInfo is unusable.
 
     """
-    image = decode_image(msg.image)
+    image = decode_image(msg.image, max_pixels)
     camera = camera_model_from_msg(msg.camera_info) if msg.has_camera_info else None
     odometry: dict[str, Any] | None = None
     if msg.has_odometry:

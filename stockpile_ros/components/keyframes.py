@@ -79,6 +79,7 @@ class KeyframeComponent:
     def __init__(self, settings: Settings, f: MessageFactory) -> None:
         self.f = f
         self.use_odometry = settings.recon.use_odometry
+        self.max_pixels = settings.recon.max_image_pixels
         self.collector = KeyframeCollector(
             WorkFolder(settings.work_dir).capture,
             settings.recon.selector,
@@ -152,7 +153,7 @@ class KeyframeComponent:
         if self._resume_after is not None and stamp <= self._resume_after:
             return []
         try:
-            image = decode_image(msg)
+            image = decode_image(msg, self.max_pixels)
         except ImageError as exc:
             reason = str(exc)
             self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + 1

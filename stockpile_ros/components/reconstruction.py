@@ -52,6 +52,7 @@ class ReconstructionComponent:
         self.work = WorkFolder(settings.work_dir)
         self.store = KeyframeStore(self.work.keyframes)
         self.auto_trigger = int(settings.values['auto_trigger_keyframes'])
+        self.max_pixels = settings.recon.max_image_pixels
         self.announced = 0
         self.coverage = 0.0
         self._auto_started = False
@@ -66,7 +67,7 @@ class ReconstructionComponent:
     def on_keyframe(self, msg: Any, log_ns: int) -> list[Publication]:
         """Store one keyframe (a repeat of one held is ignored)."""
         try:
-            received = read_keyframe(msg)
+            received = read_keyframe(msg, self.max_pixels)
         except (ImageError, CameraInfoError) as exc:
             return [diagnostics(self.f, log_ns, 'keyframes', 'ERROR',
                                 f'keyframe {msg.index} unusable: {exc}')]  # fmt: skip

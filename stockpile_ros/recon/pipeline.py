@@ -18,6 +18,7 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
+from ..bagio.images import DEFAULT_MAX_PIXELS
 from ..errors import CaptureError, StockpileError
 from ..geometry import Similarity, umeyama
 from ..meshio import LabelledMesh, write_labelled_mesh
@@ -79,6 +80,9 @@ class ReconOptions:
             surface,
             and never farther than the farthest camera (0 keeps all): far ground seen at grazing
             angles only costs Poisson resolution.
+        max_image_pixels: Largest image accepted, width x height, checked from the header
+            before it is decoded (a bag's image or a photo that claims more is refused with the
+            reason): bounds what one image can cost in memory, 3 bytes a pixel and a few copies.
 
     """
 
@@ -91,6 +95,7 @@ class ReconOptions:
     use_odometry: bool = True
     crop_radius: Annotated[float, Range(0.0, 100.0)] = 1.5
     odometry_tolerance: Annotated[float, Range(0.0, 10.0)] = 0.05
+    max_image_pixels: Annotated[int, Range(10_000, 1_000_000_000)] = DEFAULT_MAX_PIXELS
 
 
 @dataclass(frozen=True)
@@ -155,7 +160,8 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
     store = collector.store
     before = len(store.records)
     seen = 0
-    for frame in progress(iter_frames(source, options.topic), 'keyframes', unit='frame'):
+    frames = iter_frames(source, options.topic, max_pixels=options.max_image_pixels)
+    for frame in progress(frames, 'keyframes', unit='frame'):
         seen += 1
         if frame.index <= store.last_index:
             continue
