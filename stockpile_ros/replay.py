@@ -13,6 +13,7 @@ Foxglove shows the camera; results carry the stamp of their trigger.
 from __future__ import annotations
 
 import dataclasses
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,11 +21,11 @@ from typing import Any
 from . import topics
 from .bagdrive import bag_inputs, drive
 from .bagio.reader import BagReader, ReadStats
-from .bagio.writer import BagWriter
+from .bagio.writer import PARTIAL_SUFFIX, BagWriter
 from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
-from .errors import StockpileError
-from .publish import DIAGNOSTIC_PREFIX, Publication
+from .publish import DIAGNOSTIC_PREFIX, Publication, diagnostics, status
 from .runner import Outcome
+from .runs import claim
 from .settings import Settings, write_effective
 
 __all__ = ['ReplaySummary', 'replay']
@@ -102,15 +103,20 @@ class _Rig:
         self.keyframes = KeyframeComponent(settings, f)
         self.reconstruction = ReconstructionComponent(settings, f)
         self.segmentation = SegmentationComponent(settings, f)
+        self._last_ns = 0
+        self._waiting: int | None = None
 
     def publish(self, stamp_ns: int, publications: list[Publication]) -> None:
         """Write each publication and deliver it to its subscribers, in order."""
+        self._last_ns = max(self._last_ns, stamp_ns)
         for name, msg in publications:
             self.writer.write(topics.absolute(name), msg, stamp_ns)
             if name == topics.DIAGNOSTICS:
                 self.summary.problems.extend(_problems(msg))
             elif name == topics.KEYFRAMES:
                 self.publish(stamp_ns, self.reconstruction.on_keyframe(msg, stamp_ns))
+                if self._waiting is not None and not self.reconstruction.missing():
+                    self._run(self._waiting)
             elif name == topics.KEYFRAME_STATUS:
                 if self.reconstruction.on_keyframe_status(msg):
                     self.reconstruct(stamp_ns)
@@ -118,7 +124,25 @@ class _Rig:
                 self.segment(stamp_ns, msg)
 
     def reconstruct(self, stamp_ns: int) -> None:
-        """Run the reconstruction (a trigger); the surface it publishes is segmented in turn."""
+        """Run the reconstruction (a trigger); the surface it publishes is segmented in turn.
+
+        As the live node does, it waits for the keyframes announced but still waiting for their
+        odometry: it runs once the bag's next messages (or its end) have sent them.
+        """
+        if self.reconstruction.missing():
+            self._waiting = stamp_ns
+            return
+        self._run(stamp_ns)
+
+    def finish(self, last_ns: int) -> None:
+        """At the end of the bag: run a trigger still waiting, or once if the bag had none."""
+        if self._waiting is not None:
+            self._run(self._waiting)
+        elif self.summary.triggers == 0:
+            self._run(last_ns)
+
+    def _run(self, stamp_ns: int) -> None:
+        self._waiting = None
         s = self.summary
         s.triggers += 1
         held = self.reconstruction.held
@@ -126,6 +150,16 @@ class _Rig:
         s.recon = s.outcome = self.reconstruction.run(
             self.settings, stamp_ns, lambda pubs: self.publish(stamp_ns, pubs)
         )
+
+    def interrupted(self) -> None:
+        """Close the output bag's story: the run was stopped, not finished."""
+        f, held = self.writer.factory, self.reconstruction.held
+        text = 'replay interrupted before it finished: no result'
+        self.publish(self._last_ns, [
+            diagnostics(f, self._last_ns, 'replay', 'ERROR', text),
+            status(f, self._last_ns, 'FAILED', 'replay', held, text,
+                   'Run it again with --resume to continue'),
+        ])  # fmt: skip
 
     def segment(self, stamp_ns: int, surface: Any) -> None:
         failed = self.segmentation.on_surface(surface, stamp_ns)
@@ -145,33 +179,58 @@ class _Rig:
 
 
 def replay(
-    bag: str | Path, out: str | Path, settings: Settings, topic: str | None = None
+    bag: str | Path,
+    out: str | Path,
+    settings: Settings,
+    topic: str | None = None,
+    *,
+    resume: bool = False,
+    fresh: bool = False,
 ) -> ReplaySummary:
     """Replay ``bag`` into ``out``: ``work/``, ``result/`` and the ``replay.mcap`` file.
 
+    ``out`` is claimed for this bag and these parameters (``run.json``, see
+    :mod:`stockpile_ros.runs`); a rerun writes ``replay.mcap`` and ``result/`` anew, so a failed
+    one leaves neither of an earlier run.
+
     Args:
         bag: Input bag (folder, ``.mcap`` or ``.db3``).
-        out: Output folder (created; must not hold a previous ``replay.mcap``).
+        out: Output folder (created).
         settings: Parameters; ``work_dir`` is replaced by ``out/work``.
         topic: Image topic (default: the one with most messages).
+        resume: Continue the run of this bag and parameters that ``out`` holds (the keyframes
+            already kept are not selected again).
+        fresh: Clear ``out`` and start over.
 
     Returns:
         The summary; ``ok`` is False when no result could be produced (the reasons are in
         ``problems`` and, as diagnostics, in the output bag).
 
     Raises:
-        StockpileError: The bag cannot be opened, has no image topic, or ``out`` holds a replay.
+        StockpileError: The bag cannot be opened or has no image topic; ``out`` is in use or
+            holds another run (:func:`~stockpile_ros.runs.claim`).
+        KeyboardInterrupt: Interrupted; the output bag, finalised as ``replay.mcap.partial``,
+            ends with a FAILED status that says so, and ``run.json`` says ``interrupted``.
 
     """
     out_dir = Path(out)
-    output_bag = out_dir / 'replay.mcap'
-    if output_bag.exists():
-        raise StockpileError(f'{output_bag} exists already; choose another --out or remove it')
-    out_dir.mkdir(parents=True, exist_ok=True)
     settings = dataclasses.replace(settings, work_dir=out_dir / 'work')
-    write_effective(settings, settings.work_dir)
-    summary = ReplaySummary(bag=Path(bag), image_topic='', work_dir=settings.work_dir,
+    with claim(out_dir, Path(bag), settings.values, resume=resume, fresh=fresh) as run:
+        summary = _replay(Path(bag), out_dir, settings, topic)
+        if not summary.ok:
+            run.state = 'failed'
+    return summary
+
+
+def _replay(bag: Path, out_dir: Path, settings: Settings, topic: str | None) -> ReplaySummary:
+    output_bag = out_dir / 'replay.mcap'
+    summary = ReplaySummary(bag=bag, image_topic='', work_dir=settings.work_dir,
                             result_dir=out_dir / 'result', output_bag=output_bag)  # fmt: skip
+    partial = output_bag.with_name(output_bag.name + PARTIAL_SUFFIX)
+    for stale in (output_bag, partial):
+        stale.unlink(missing_ok=True)
+    shutil.rmtree(summary.result_dir, ignore_errors=True)
+    write_effective(settings, settings.work_dir)
     stats = ReadStats()
     with BagReader(bag) as reader:
         inputs = bag_inputs(reader, topic)
@@ -186,10 +245,13 @@ def replay(
                 except (KeyError, ValueError, TypeError) as exc:
                     stats.problems.append(f'{name}: not passed through ({exc})')
 
-            last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
-                            on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
-            if summary.triggers == 0:
-                rig.reconstruct(last_ns)
+            try:
+                last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
+                                on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
+                rig.finish(last_ns)
+            except KeyboardInterrupt:
+                rig.interrupted()
+                raise
     kf = rig.keyframes
     summary.frames = kf.collector.state.frames
     summary.skipped = sum(kf.counts.skipped.values()) + stats.total_skipped

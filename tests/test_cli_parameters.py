@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -90,12 +91,15 @@ def test_reconstruct_writes_the_effective_parameters_before_the_stages(
     params.write_text(
         '/**:\n  ros__parameters:\n    sfm:\n      overlap: 3\n      max_features: 99\n'
     )
-    work = tmp_path / 'work'
-    # The sfm stage fails on an empty work folder; the parameters it was given are on record.
-    argv = ['reconstruct', '--work', str(work), '--stage', 'sfm', '--params', str(params),
+    work, photos = tmp_path / 'work', tmp_path / 'photos'
+    photos.mkdir()
+    # A folder without photos fails in the keyframe stage; the parameters it was given are on
+    # record, and so is the failed run.
+    argv = ['reconstruct', str(photos), '--work', str(work), '--params', str(params),
             '--set', 'sfm.overlap=5', '--no-odometry', '--matcher', 'exhaustive']  # fmt: skip
     assert main(argv) == 2
-    assert 'keyframe' in capsys.readouterr().err
+    assert str(photos) in capsys.readouterr().err
+    assert json.loads((work / 'run.json').read_text())['state'] == 'failed'
     values = load_params_yaml(work / 'params.yaml')
     assert values['sfm.overlap'] == 5 and values['sfm.max_features'] == 99
     assert values['recon.use_odometry'] is False and values['sfm.matcher'] == 'exhaustive'

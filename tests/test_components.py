@@ -62,6 +62,8 @@ def test_a_keyframe_waits_for_the_odometry_after_its_stamp_and_is_interpolated(
     image = _image(0)
     out += kf.on_image(image, 0)
     assert not _kept(out) and kf.pending == 1  # odometry has not passed the stamp yet
+    # Announced all the same: a reconstruction triggered now waits for it.
+    assert [msg for name, msg in out if name == topics.KEYFRAME_STATUS][-1].keyframes == 1
     sent = _kept(kf.on_odometry(_odom(1050 * MS, 2.0), 0))
     assert len(sent) == 1 and kf.pending == 0
     key = sent[0]

@@ -108,31 +108,41 @@ def test_refuses_to_overwrite_and_bad_parameters_are_user_errors(
     assert 'outside' in capsys.readouterr().err
     replay(bag, out, build_settings())
     assert main(['replay', str(bag), '--out', str(out)]) == 2
-    assert 'exists already' in capsys.readouterr().err
+    assert 'holds a run of this input' in capsys.readouterr().err
 
 
-@pytest.mark.slow
-def test_simulated_bag_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = tmp_path / 'pile'
-    assert main(['simulate', '--out', str(bag), '--frames', '16', '--width', '320',
-                 '--height', '240', '--rocks', '5', '--threads', '1']) == 0  # fmt: skip
+def test_a_folder_belongs_to_one_input_and_a_rerun_is_asked_for(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    one, other = _bag(tmp_path / 'one', 6), _bag(tmp_path / 'other', 7)
     out = tmp_path / 'out'
-    assert main(['replay', str(bag), '--out', str(out), '--params', str(CONFIG),
-                 '--set', 'sfm.num_threads=1']) == 0  # fmt: skip
-    printed = capsys.readouterr().out
-    assert 'rocks, D50' in printed and str(out / 'result') in printed
-    report = json.loads((out / 'result' / 'report.json').read_text())
-    assert report['scale']['method'] != 'none'
-    for part in ('capture/keyframes.jsonl', 'keyframes/keyframes.jsonl', 'sparse/sparse.json',
-                 'dense/dense.ply', 'mesh/mesh.ply', 'surface/mesh.ply'):  # fmt: skip
-        assert (out / 'work' / part).is_file(), part
-    msgs = _read(out / 'replay.mcap')
-    for entry in topics.TABLE:  # every topic the node set publishes
-        if entry.publishers:
-            assert msgs.get(topics.absolute(entry.name)), entry.name
-    for topic in ('/camera/image_raw/compressed', '/camera/camera_info', '/tf', '/odom'):
-        assert msgs.get(topic), topic
-    assert len(msgs['/' + topics.ROCKS][-1].rocks) == len(report['rocks']) > 0
-    assert msgs['/' + topics.STATUS][-1].state == 4  # DONE
-    levels = {n: lvl for n, lvl, _ in _diagnostics(msgs)}
-    assert levels['stockpile/sfm'] == 0 and levels['stockpile/segment'] == 0
+    first = replay(one, out, build_settings())
+    kept = len((out / 'work' / 'keyframes' / 'keyframes.jsonl').read_text().splitlines())
+    assert json.loads((out / 'run.json').read_text())['state'] == 'failed'  # too few to reconstruct
+    # Another bag is refused, never appended; so are other parameters.
+    assert main(['replay', str(other), '--out', str(out), '--resume']) == 2
+    assert 'another input' in capsys.readouterr().err
+    assert main(['replay', str(one), '--out', str(out), '--resume',
+                 '--set', 'sfm.max_features=999']) == 2  # fmt: skip
+    assert 'other parameters' in capsys.readouterr().err
+    # The same bag resumed keeps each keyframe once (a rerun after kill -9 doubled them).
+    again = replay(one, out, build_settings(), resume=True)
+    assert again.keyframes == first.keyframes
+    assert len((out / 'work' / 'keyframes' / 'keyframes.jsonl').read_text().splitlines()) == kept
+    # --fresh starts over on the other bag; the earlier result and bag are gone.
+    assert main(['replay', str(other), '--out', str(out), '--fresh']) == 1
+    assert json.loads((out / 'run.json').read_text())['input'] == str(other)
+    assert not (out / 'result').exists()
+
+
+def test_file_system_faults_are_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = _bag(tmp_path / 'in', 2)
+    (tmp_path / 'file').write_text('x')
+    assert main(['replay', str(bag), '--out', str(tmp_path / 'file')]) == 2
+    assert 'is a file' in capsys.readouterr().err
+    # A folder that cannot be made (here under a file; a read-only mount fails the same way).
+    assert main(['replay', str(bag), '--out', str(tmp_path / 'file' / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and str(tmp_path / 'file') in err and 'Traceback' not in err

@@ -68,6 +68,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except StockpileError as exc:
         print(f'stockpile {args.command}: error: {exc}', file=sys.stderr)
         return 2
+    except OSError as exc:
+        # A file-system fault (full disk, read-only, permissions): the path and the fault.
+        where = f'{exc.filename}: ' if exc.filename else ''
+        print(f'stockpile {args.command}: error: {where}{exc.strerror or exc}', file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f'stockpile {args.command}: interrupted', file=sys.stderr)
         return 130

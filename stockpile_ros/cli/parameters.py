@@ -18,7 +18,7 @@ from typing import Any
 from ..errors import StockpileError
 from ..settings import Settings, Value, build_settings, check_value, get_setting, load_params_yaml
 
-__all__ = ['Alias', 'add_parameter_arguments', 'settings_from_args']
+__all__ = ['Alias', 'add_parameter_arguments', 'add_run_arguments', 'settings_from_args']
 
 # Namespace attribute the aliases record into: {table key: (flag, text or constant)}.
 _ALIASED = 'aliased'
@@ -95,6 +95,18 @@ def add_parameter_arguments(parser: argparse.ArgumentParser, aliases: Sequence[A
                                     else 'VALUE')  # fmt: skip
         group.add_argument(alias.flag, action=_SetKey, dest=_ALIASED, key=alias.name,
                            metavar=metavar, required=alias.required, help=text)  # fmt: skip
+
+
+def add_run_arguments(parser: argparse.ArgumentParser, folder: str) -> None:
+    """Add ``--resume`` and ``--fresh``: what to do with a ``folder`` that holds a run."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        '--resume',
+        action='store_true',
+        help=f'continue the run of the same input and parameters in {folder}',
+    )
+    group.add_argument('--fresh', action='store_true',
+                       help=f'clear {folder} and start over')  # fmt: skip
 
 
 def _assignment(item: str) -> tuple[str, Value]:

@@ -10,8 +10,9 @@ from typing import Any
 
 from ..bagdrive import collect_keyframes
 from ..recon.pipeline import STAGES, reconstruct
+from ..runs import claim
 from ..settings import write_effective
-from .parameters import Alias, add_parameter_arguments, settings_from_args
+from .parameters import Alias, add_parameter_arguments, add_run_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
@@ -51,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--stage', choices=(*STAGES, 'all'), default='all', help='stage to run')
     parser.add_argument('--topic', help='image topic of a bag (default: the busiest)')
     add_parameter_arguments(parser, _ALIASES)
+    add_run_arguments(parser, 'the work folder')
 
 
 def _summary(name: str, result: dict[str, Any], seconds: float) -> None:
@@ -61,9 +63,12 @@ def _summary(name: str, result: dict[str, Any], seconds: float) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the requested stages; returns 0 on success."""
     settings = settings_from_args(args)
-    # Written before the stages run, so that a failed run also says what it was asked to do.
-    write_effective(settings, settings.work_dir)
-    options = replace(settings.recon, topic=args.topic)
-    reconstruct(args.source, settings.work_dir, options, args.stage, report=_summary,
-                keyframe_stage=collect_keyframes(settings))  # fmt: skip
+    # A later stage alone reruns the work folder's run (other parameters are the point of it).
+    source = args.source if args.stage in ('all', 'keyframes') else None
+    with claim(settings.work_dir, source, settings.values, resume=args.resume, fresh=args.fresh):
+        # Written before the stages run, so that a failed run also says what it was asked to do.
+        write_effective(settings, settings.work_dir)
+        options = replace(settings.recon, topic=args.topic)
+        reconstruct(args.source, settings.work_dir, options, args.stage, report=_summary,
+                    keyframe_stage=collect_keyframes(settings))  # fmt: skip
     return 0

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..replay import ReplaySummary, replay
-from .parameters import add_parameter_arguments, settings_from_args
+from .parameters import add_parameter_arguments, add_run_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
@@ -31,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--out', type=Path, required=True, help='output folder')
     parser.add_argument('--topic', help='image topic (default: the one with most messages)')
     add_parameter_arguments(parser)
+    add_run_arguments(parser, 'OUT')
 
 
 def _print_summary(s: ReplaySummary) -> None:
@@ -66,6 +67,7 @@ def _print_summary(s: ReplaySummary) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    summary = replay(args.bag, args.out, settings_from_args(args), args.topic)
+    summary = replay(args.bag, args.out, settings_from_args(args), args.topic,
+                     resume=args.resume, fresh=args.fresh)  # fmt: skip
     _print_summary(summary)
     return 0 if summary.ok else 1

@@ -5,11 +5,12 @@ or emits, the ``(topic, message)`` pairs to publish. The nodes in :mod:`stockpil
 them to rclpy; :mod:`stockpile_ros.replay` drives them from a bag. Topics: :mod:`.topics`.
 """
 
-from .keyframes import KeyframeComponent, KeyframeCounts
+from .keyframes import WAIT_NS, KeyframeComponent, KeyframeCounts
 from .reconstruction import Emit, ReconstructionComponent
 from .segmentation import SegmentationComponent, verdict
 
 __all__ = [
+    'WAIT_NS',
     'Emit',
     'KeyframeComponent',
     'KeyframeCounts',

@@ -174,7 +174,7 @@ class KeyframeComponent:
         if decision.accepted:
             self._pending.append(_Pending(frame, decision, keyframe_image(msg, image)))
         out = self._resolve(final=False)
-        out.append(keyframe_status(self.f, stamp, self.collector.state))
+        out.append(self.status(stamp))
         return out
 
     def _camera(self, frame: Frame) -> tuple[CameraModel | None, list[Publication]]:
@@ -193,6 +193,16 @@ class KeyframeComponent:
                                 f'are {width}x{height}: such frames are self-calibrated',
                                 frame.stamp_ns)  # fmt: skip
 
+    def status(self, stamp_ns: int) -> Publication:
+        """Return the keyframe status; its count includes the keyframes waiting for odometry.
+
+        A reconstruction waits for every keyframe announced, so the count must not leave out
+        the last ones of a pass, still waiting when the trigger comes.
+        """
+        state = self.collector.state
+        announced = dataclasses.replace(state, keyframes=state.keyframes + len(self._pending))
+        return keyframe_status(self.f, stamp_ns, announced)
+
     def flush(self, stamp_ns: int) -> list[Publication]:
         """Send every waiting keyframe with the odometry known now, and count the frames skipped.
 
@@ -200,7 +210,7 @@ class KeyframeComponent:
         """
         out = self._resolve(final=True)
         if out:
-            out.append(keyframe_status(self.f, stamp_ns, self.collector.state))
+            out.append(self.status(stamp_ns))
         if self.counts.skipped:
             total = sum(self.counts.skipped.values())
             why = '; '.join(f'{n} x {reason}' for reason, n in self.counts.skipped.items())

@@ -88,6 +88,11 @@ class ReconstructionComponent:
             return True
         return False
 
+    def missing(self) -> int:
+        """Keyframes announced by the keyframe node that have not arrived yet."""
+        with self._held:
+            return max(0, self.announced - len(self.store.records))
+
     def wait_for_keyframes(self, timeout_s: float) -> int:
         """Wait until every announced keyframe has arrived or ``timeout_s`` passed; return missing.
 

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from rclpy.node import Node
 
 from .. import topics
-from ..components import KeyframeComponent
+from ..components import WAIT_NS, KeyframeComponent
 from .common import (
     Publishers,
     RclpyFactory,
@@ -38,10 +39,21 @@ class KeyframeNode(Node):
         subscribe(self, topics.ODOMETRY, self.on_odometry)
         subscribe(self, topics.TF_STATIC, self.on_tf_static)
         subscribe(self, topics.TF, self.on_tf)
+        self.last_image = time.monotonic()
+        # Keyframes still waiting for odometry when the camera goes quiet go out with what is
+        # known (a replay does it at the end of the bag).
+        self.create_timer(0.5, self.on_quiet)
 
     def on_image(self, msg: Any) -> None:
         """Offer the frame to the selector."""
+        self.last_image = time.monotonic()
         self.pubs.publish(self.component.on_image(msg, now_ns(self)))
+
+    def on_quiet(self) -> None:
+        """Send the waiting keyframes once no image has come for the component's wait."""
+        quiet = time.monotonic() - self.last_image > WAIT_NS / 1e9
+        if quiet and self.component.pending:
+            self.pubs.publish(self.component.flush(now_ns(self)))
 
     def on_info(self, msg: Any) -> None:
         """Keep the latest usable camera model."""
