@@ -59,6 +59,9 @@ def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
         result = node.set_parameters([Parameter('selector.min_parallax', value=5.0)])[0]
         assert not result.successful
         assert not node.set_parameters([Parameter('work_dir', value='/x')])[0].successful
+        # A value accepted at run time takes effect from the next frame on.
+        assert node.set_parameters([Parameter('selector.min_parallax', value=0.5)])[0].successful
+        assert node.component.collector.selector.options.min_parallax == 0.5
     finally:
         node.destroy_node()
 

@@ -97,6 +97,12 @@ class KeyframeComponent:
         self._latest_frame_ns = 0
         self._noted: set[str] = set()
 
+    def reconfigure(self, settings: Settings) -> None:
+        """Take changed parameters (a node's ``ros2 param set``) from the next frame on."""
+        self.use_odometry = settings.recon.use_odometry
+        self.max_pixels = settings.recon.max_image_pixels
+        self.collector.selector.reconfigure(settings.recon.selector)
+
     @property
     def pending(self) -> int:
         """Keyframes kept but still waiting for their odometry."""

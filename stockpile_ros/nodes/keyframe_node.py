@@ -40,6 +40,10 @@ class KeyframeNode(Node):
         subscribe(self, topics.TF_STATIC, self.on_tf_static)
         subscribe(self, topics.TF, self.on_tf)
         self.last_image = time.monotonic()
+        # Parameters were checked before they were set (declare_settings): apply them.
+        self.add_post_set_parameters_callback(
+            lambda _: self.component.reconfigure(current_settings(self, 'keyframes'))
+        )
         # Keyframes still waiting for odometry when the camera goes quiet go out with what is
         # known (a replay does it at the end of the bag).
         self.create_timer(0.5, self.on_quiet)

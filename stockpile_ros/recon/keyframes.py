@@ -120,6 +120,11 @@ class KeyframeSelector:
         self._since_key = 0
         self.count = 0
 
+    def reconfigure(self, options: SelectorOptions) -> None:
+        """Take new thresholds from the next frame on (the recent sharpness is kept)."""
+        self.options = options
+        self._recent = deque(self._recent, maxlen=options.reference_frames)
+
     def resume(self, last_keyframe: npt.NDArray[np.generic], count: int) -> None:
         """Continue after a restart from the last keyframe written and the number already kept."""
         self._set_keyframe(_grey_small(last_keyframe, self.options.work_width))
