@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from . import topics
-from .bagdrive import bag_inputs, drive
+from .bagdrive import BagInputs, bag_inputs, drive
 from .bagio.reader import BagReader, ReadStats
 from .bagio.writer import PARTIAL_SUFFIX, BagWriter
 from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
@@ -215,16 +215,21 @@ def replay(
     """
     out_dir = Path(out)
     settings = dataclasses.replace(settings, work_dir=out_dir / 'work')
-    with claim(out_dir, Path(bag), settings.values, resume=resume, fresh=fresh) as run:
-        summary = _replay(Path(bag), out_dir, settings, topic)
-        if not summary.ok:
-            run.state = 'failed'
+    # The bag is opened first: one that is not a bag is refused before a folder is claimed.
+    with BagReader(bag) as reader:
+        inputs = bag_inputs(reader, topic)
+        with claim(out_dir, Path(bag), settings.values, resume=resume, fresh=fresh) as run:
+            summary = _replay(reader, inputs, out_dir, settings)
+            if not summary.ok:
+                run.state = 'failed'
     return summary
 
 
-def _replay(bag: Path, out_dir: Path, settings: Settings, topic: str | None) -> ReplaySummary:
+def _replay(
+    reader: BagReader, inputs: BagInputs, out_dir: Path, settings: Settings
+) -> ReplaySummary:
     output_bag = out_dir / 'replay.mcap'
-    summary = ReplaySummary(bag=bag, image_topic='', work_dir=settings.work_dir,
+    summary = ReplaySummary(bag=reader.path, image_topic=inputs.image, work_dir=settings.work_dir,
                             result_dir=out_dir / 'result', output_bag=output_bag)  # fmt: skip
     partial = output_bag.with_name(output_bag.name + PARTIAL_SUFFIX)
     for stale in (output_bag, partial):
@@ -232,26 +237,23 @@ def _replay(bag: Path, out_dir: Path, settings: Settings, topic: str | None) -> 
     shutil.rmtree(summary.result_dir, ignore_errors=True)
     write_effective(settings, settings.work_dir)
     stats = ReadStats()
-    with BagReader(bag) as reader:
-        inputs = bag_inputs(reader, topic)
-        summary.image_topic = inputs.image
-        latched = {topics.absolute(t.name) for t in topics.TABLE if t.qos in _LATCHED_QOS}
-        with BagWriter(output_bag, latched=latched) as writer:
-            rig = _Rig(settings, writer, summary)
+    latched = {topics.absolute(t.name) for t in topics.TABLE if t.qos in _LATCHED_QOS}
+    with BagWriter(output_bag, latched=latched) as writer:
+        rig = _Rig(settings, writer, summary)
 
-            def passthrough(name: str, msg: Any, log_ns: int) -> None:
-                try:
-                    writer.write(name, msg, log_ns)
-                except (KeyError, ValueError, TypeError) as exc:
-                    stats.problems.append(f'{name}: not passed through ({exc})')
-
+        def passthrough(name: str, msg: Any, log_ns: int) -> None:
             try:
-                last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
-                                on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
-                rig.finish(last_ns)
-            except KeyboardInterrupt:
-                rig.interrupted()
-                raise
+                writer.write(name, msg, log_ns)
+            except (KeyError, ValueError, TypeError) as exc:
+                stats.problems.append(f'{name}: not passed through ({exc})')
+
+        try:
+            last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
+                            on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
+            rig.finish(last_ns)
+        except KeyboardInterrupt:
+            rig.interrupted()
+            raise
     kf = rig.keyframes
     summary.frames = kf.collector.state.frames
     summary.skipped = sum(kf.counts.skipped.values()) + stats.total_skipped

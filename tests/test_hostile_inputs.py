@@ -375,3 +375,152 @@ def test_explicit_units_on_an_implausibly_small_mesh_finish_and_warn(
     report = json.loads((tmp_path / 'r' / 'report.json').read_text())
     assert not report['mesh']['check']['plausible']
     assert any('implausible' in w for w in report['warnings'])
+
+
+# --- bags with bad poses, cameras and sizes; parameters; output folders; interruptions --------
+
+CAM = '/camera/image_raw'
+
+
+def _camera_bag(
+    path: Path,
+    frames: int = 6,
+    *,
+    odometry: Callable[[int], tuple[tuple[float, ...], tuple[float, ...]]] | None = None,
+    info: tuple[int, int] | None = (64, 48),
+    size: Callable[[int], tuple[int, int]] = lambda i: (48, 64),
+) -> Path:
+    """A small camera bag: random frames, CameraInfo of ``info`` (w, h), odometry if given."""
+    with BagWriter(path) as bag:
+        f = bag.factory
+        for i in range(frames):
+            stamp = S + i * S // 10
+            pixels = (np.random.default_rng(i).random((*size(i), 3)) * 255).astype(np.uint8)
+            bag.write(CAM, m.image(f, pixels, stamp, 'camera_optical'), stamp)
+            if info is not None:
+                k = np.array([[60.0, 0, info[0] / 2], [0, 60.0, info[1] / 2], [0, 0, 1]])
+                camera = m.CameraModel(info[0], info[1], k, np.zeros(5), 'plumb_bob', 'cam')
+                bag.write('/camera/camera_info', m.camera_info(f, camera, stamp), stamp)
+            if odometry is not None:
+                position, quat = odometry(i)
+                bag.write('/odom', m.odometry(f, stamp, position, quat), stamp)
+    return path
+
+
+BAD_BAGS = {
+    'zero quaternion in odometry': (
+        lambda p: _camera_bag(p, odometry=lambda i: ((0.1 * i, 0, 0), (0, 0, 0, 0))),
+        'zero quaternion',
+    ),
+    'NaN position in odometry': (
+        lambda p: _camera_bag(p, odometry=lambda i: ((float('nan'), 0, 0), (0, 0, 0, 1))),
+        'non-finite value',
+    ),
+    'CameraInfo of another size': (
+        lambda p: _camera_bag(p, info=(640, 480)),
+        'CameraInfo is 640x480 but the images are 64x48',
+    ),
+    'images that change size': (
+        lambda p: _camera_bag(p, size=lambda i: (48, 64) if i < 3 else (96, 128)),
+        'image size changed from 64x48 to 128x96',
+    ),
+    'no image topic': (
+        lambda p: _camera_bag(p, frames=0, odometry=lambda i: ((0, 0, 0), (0, 0, 0, 1))),
+        'no Image or CompressedImage topic',
+    ),
+}
+
+
+@pytest.mark.parametrize('case', list(BAD_BAGS))
+def test_bad_bags_are_reported_by_cause(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str
+) -> None:
+    make, words = BAD_BAGS[case]
+    bag = make(tmp_path / 'bag')
+    code, out, err, peak = _run(capsys, ['replay', str(bag), '--out', str(tmp_path / 'out')])
+    assert code in (1, 2) and words in err, err  # no result from six frames, or refused
+    assert 'intrinsics CameraInfo' not in out or case != 'CameraInfo of another size'
+    assert peak < PEAK_BOUND
+
+
+def test_not_a_bag_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'o'
+    for source in (tmp_path / 'notes.txt', tmp_path / 'empty'):
+        source.write_text('x') if source.suffix else source.mkdir()
+        code, _, err, _ = _run(capsys, ['replay', str(source), '--out', str(out)])
+        assert code == 2 and str(source) in err
+    assert not out.exists()  # refused before the folder was claimed
+
+
+BAD_PARAMETERS = {
+    'segment.threshold=.nan': 'not a finite number',
+    'measure.specific_gravity=.inf': 'not a finite number',
+    'sfm.matcher=bogus': 'is not one of sequential, exhaustive',
+    'sfm.overlap=0': 'is outside [1, 1000]',
+    'recon.target=charuco:1x1:0.08:0.06:DICT_4X4_50': 'at least 2 x 2 squares',
+    'sfm.nosuch=1': "unknown parameter 'sfm.nosuch'",
+    'sfm.max_features=many': 'expected int',
+    'gradation.spec_class=XIV': "'XIV' is not one of",
+}
+
+
+@pytest.mark.parametrize('assignment', list(BAD_PARAMETERS))
+def test_bad_parameters_are_refused_before_any_stage(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], assignment: str
+) -> None:
+    bag, out = _camera_bag(tmp_path / 'bag'), tmp_path / 'out'
+    code, _, err, peak = _run(capsys, ['replay', str(bag), '--out', str(out), '--set', assignment])
+    assert code == 2 and BAD_PARAMETERS[assignment] in err and peak < PEAK_BOUND
+    assert not out.exists()  # refused before anything was written
+
+
+def test_output_folders_that_cannot_take_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag, other = _camera_bag(tmp_path / 'bag'), _camera_bag(tmp_path / 'other', 7)
+    (tmp_path / 'file').write_text('x')
+    stray = tmp_path / 'stray'
+    stray.mkdir()
+    (stray / 'report.json').write_text('{}')
+    out = tmp_path / 'out'
+    assert _run(capsys, ['replay', str(bag), '--out', str(out)])[0] == 1
+    cases = {
+        str(tmp_path / 'file'): 'is a file',
+        str(tmp_path / 'file' / 'sub'): str(tmp_path / 'file'),
+        str(stray): 'holds no run record',
+    }
+    for folder, words in cases.items():
+        code, _, err, _ = _run(capsys, ['replay', str(bag), '--out', folder])
+        assert code == 2 and words in err, (folder, err)
+    code, _, err, _ = _run(capsys, ['replay', str(other), '--out', str(out), '--resume'])
+    assert code == 2 and 'another input' in err
+    code, _, err, _ = _run(capsys, ['replay', str(bag), '--out', str(out)])
+    assert code == 2 and '--resume continues it' in err
+
+
+def test_an_interrupted_replay_says_so_in_its_bag_and_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from stockpile_ros.components import KeyframeComponent
+
+    bag, out = _camera_bag(tmp_path / 'bag'), tmp_path / 'out'
+    seen = KeyframeComponent.on_image
+
+    def on_image(self: KeyframeComponent, msg: Any, log_ns: int) -> Any:
+        if self.collector.state.frames == 3:
+            raise KeyboardInterrupt  # Ctrl-C in the middle of the bag
+        return seen(self, msg, log_ns)
+
+    monkeypatch.setattr(KeyframeComponent, 'on_image', on_image)
+    code, _, err, _ = _run(capsys, ['replay', str(bag), '--out', str(out)])
+    assert code == 130 and 'interrupted' in err
+    assert not (out / 'replay.mcap').exists() and (out / 'replay.mcap.partial').is_file()
+    assert json.loads((out / 'run.json').read_text())['state'] == 'interrupted'
+    from rosbags.highlevel import AnyReader
+
+    readable = tmp_path / 'partial.mcap'  # as docs/formats.md says: rename it to open it
+    readable.write_bytes((out / 'replay.mcap.partial').read_bytes())
+    with AnyReader([readable]) as reader:
+        statuses = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
+                    if c.topic == '/stockpile/status']  # fmt: skip
+    assert statuses[-1].state == 5 and 'interrupted' in statuses[-1].message
