@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
 
 from ..camera import Frame
 from .keyframes import Decision, KeyframeRecord, KeyframeSelector, KeyframeStore, SelectorOptions
@@ -32,6 +34,7 @@ __all__ = [
     'CollectorState',
     'KeyframeCollector',
     'OdometryBuffer',
+    'camera_orientation',
     'heading_coverage',
 ]
 
@@ -41,6 +44,17 @@ HEADING_SECTORS = 36
 def _yaw(quat_xyzw: Any) -> float:
     x, y, z, w = (float(v) for v in quat_xyzw)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def camera_orientation(odometry: dict[str, Any] | None) -> npt.NDArray[np.float64] | None:
+    """Camera-to-world rotation of a ``keyframes.jsonl`` odometry entry, None without a camera.
+
+    Only the camera's own orientation (``camera_orientation_xyzw``, placed by the transforms from
+    the odometry's base to the camera) counts: the base turns with the cart, not with a mast.
+    """
+    if odometry is None or 'camera_orientation_xyzw' not in odometry:
+        return None
+    return np.asarray(Rotation.from_quat(odometry['camera_orientation_xyzw']).as_matrix())
 
 
 def heading_coverage(yaws: list[float]) -> float:
@@ -107,7 +121,9 @@ class KeyframeCollector:
             if r.odometry is not None and 'orientation_xyzw' in r.odometry
         ]
         if self.store.records:
-            self.selector.resume(self.store.image(self.store.records[-1]), len(self.store.records))
+            last = self.store.records[-1]
+            self.selector.resume(self.store.image(last), len(self.store.records),
+                                 camera_orientation(last.odometry))  # fmt: skip
         self._update_coverage()
 
     def _update_coverage(self) -> None:
@@ -118,12 +134,20 @@ class KeyframeCollector:
             self.state.coverage = min(1.0, self._parallax / self.full_parallax)
             self.state.coverage_source = 'parallax'
 
-    def select(self, frame: Frame) -> Decision:
+    def select(self, frame: Frame, odometry: dict[str, Any] | None = None) -> Decision:
         """Offer one frame to the selector and count its decision; nothing is stored yet.
 
         A live stream stores an accepted frame once its odometry is known (:meth:`keep`).
+
+        Args:
+            frame: The decoded frame; its ``camera`` (None: a field of view is assumed) turns
+                pixels into rays for the viewing angle.
+            odometry: The odometry entry at the frame's stamp when it is known already; its
+                camera orientation gives the rotation between this frame and the last keyframe
+                (None: the rotation is fitted to the tracked corners).
+
         """
-        decision = self.selector.push(frame.image)
+        decision = self.selector.push(frame.image, frame.camera, camera_orientation(odometry))
         self.state.frames += 1
         self.state.decisions[decision.reason] = self.state.decisions.get(decision.reason, 0) + 1
         self.state.last = decision
@@ -154,7 +178,7 @@ class KeyframeCollector:
             The selector's decision.
 
         """
-        decision = self.select(frame)
+        decision = self.select(frame, odometry)
         if decision.accepted:
             self.keep(frame, decision, odometry)
         return decision

@@ -26,6 +26,7 @@ from ..progress import progress
 from ..ranges import Range
 from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
+from .gates import GateOptions, registration_gate
 from .ground import fit_ground, pile_mask, stockpile_transform
 from .keyframes import KeyframeStore, SelectorOptions
 from .scale import (
@@ -68,6 +69,7 @@ class ReconOptions:
         selector: Keyframe selection.
         sfm: Structure-from-Motion.
         dense: Dense stereo.
+        gate: The registration gate after Structure-from-Motion.
         poisson: Surface.
         target: The ChArUco board in view, None when there is none.
         use_odometry: Scale from the bag's odometry when it has some.
@@ -90,6 +92,7 @@ class ReconOptions:
     selector: SelectorOptions = field(default_factory=SelectorOptions)
     sfm: SfmOptions = field(default_factory=SfmOptions)
     dense: DenseOptions = field(default_factory=DenseOptions)
+    gate: GateOptions = field(default_factory=GateOptions)
     poisson: PoissonOptions = field(default_factory=PoissonOptions)
     target: TargetSpec | None = None
     use_odometry: bool = True
@@ -182,15 +185,47 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
 
 
 def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
-    """Structure-from-Motion of the stored keyframes into ``work.sparse``."""
+    """Structure-from-Motion of the stored keyframes into ``work.sparse``, then the gate.
+
+    The registration gate's report is added to ``sparse.json`` (``gate``) whether it passes or
+    not, so that the dense stage, run on its own later, refuses a model that failed it.
+
+    Raises:
+        CaptureError: Structure-from-Motion failed, or its model failed the registration gate
+            (:func:`.gates.registration_gate`; the pile centre is the median of the sparse
+            points).
+
+    """
     store = KeyframeStore(work.keyframes)
-    return run_sfm(work.keyframes, store.records, work.sparse, options.sfm)
+    report = run_sfm(work.keyframes, store.records, work.sparse, options.sfm)
+    model = load_sparse(work.sparse)
+    gate = registration_gate(
+        [r.file for r in store.records],
+        report['model_images'],
+        options.gate,
+        centres={name: view.center for name, view in model.views.items()},
+        pile_centre=np.median(model.points, axis=0) if len(model.points) else None,
+    )
+    report['gate'] = gate.as_dict()
+    (work.sparse / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
+    gate.check('sfm')
+    return report
 
 
 def run_dense_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
-    """Dense cloud of the registered keyframes into ``work.dense``."""
-    if not (work.sparse / 'sparse.json').exists():
+    """Dense cloud of the registered keyframes into ``work.dense``.
+
+    Raises:
+        StockpileError: No sparse model.
+        CaptureError: The sparse model failed the registration gate.
+
+    """
+    sparse_json = work.sparse / 'sparse.json'
+    if not sparse_json.exists():
         raise StockpileError(f'{work.sparse}: no sparse model; run the sfm stage first')
+    gate = json.loads(sparse_json.read_text()).get('gate', {})
+    if gate and not gate['passed']:
+        raise CaptureError('sfm', gate['reason'], gate['advice'])
     store = KeyframeStore(work.keyframes)
     model, dropped = on_path(work, load_sparse(work.sparse), options)
     order = [r.file for r in store.records]

@@ -43,7 +43,6 @@ class SfmOptions:
         mapper: ``"incremental"`` or ``"global"`` (GLOMAP).
         num_threads: Threads for feature extraction and the global mapper. Matching and the
             incremental mapper run on one, so that a rerun gives the same model.
-        min_registered_fraction: Below this share of registered keyframes the capture fails.
         min_features: Below this mean number of features per keyframe the capture is textureless.
         use_camera_info: Use CameraInfo intrinsics when present (fixed camera).
         min_triangulation_angle: Below this median (over points) of the widest angle between
@@ -59,7 +58,6 @@ class SfmOptions:
     vocab_tree: str = ''
     mapper: Literal['incremental', 'global'] = 'incremental'
     num_threads: Annotated[int, Range(-1, 256)] = 2
-    min_registered_fraction: Annotated[float, Range(0.0, 1.0)] = 0.5
     min_features: Annotated[int, Range(0, 65536)] = 150
     use_camera_info: bool = True
     min_triangulation_angle: Annotated[float, Range(0.0, 90.0)] = 8.0
@@ -360,6 +358,10 @@ def run_sfm(
         'matcher': options.matcher,
         'mapper': options.mapper,
         'unregistered': sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
+        # Every model's images, for the registration gate (which photos or stretch went where).
+        'model_images': [
+            sorted(rec.image(i).name for i in rec.reg_image_ids()) for rec in models.values()
+        ],
     }
     report['median_triangulation_angle_deg'] = _median_triangulation_angle(best)
     best.write(out_dir)
