@@ -28,6 +28,9 @@ setup(
         'open3d-cpu>=0.19; platform_machine=="x86_64"',
         'open3d>=0.19; platform_machine!="x86_64"',
         'pycolmap>=3.11',
+        'Pillow>=9.4',
+        # HEIC/HEIF photos (iPhones' default); without it they are refused with the fix named.
+        'pillow-heif>=0.16',
         # 0.11: offered QoS per connection; the writer relies on its <folder>/<folder>.mcap naming.
         'rosbags>=0.11,<0.12',
         'tqdm>=4.60',

@@ -33,7 +33,7 @@ from .ranges import Range
 from .recon.dense import DenseOptions
 from .recon.keyframes import SelectorOptions
 from .recon.pipeline import ReconOptions
-from .recon.scale import TargetSpec
+from .recon.scale import parse_targets
 from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions
 from .segment.gradation import load_class_table
@@ -171,7 +171,7 @@ class Setting:
 _SKIP = {'recon.topic', 'recon.selector', 'recon.sfm', 'recon.dense', 'recon.poisson'}
 
 # Strings whose content is checked beyond their type when they are loaded.
-_TEXT_CHECKS: dict[str, Callable[[str], object]] = {'recon.target': TargetSpec.parse}
+_TEXT_CHECKS: dict[str, Callable[[str], object]] = {'recon.target': parse_targets}
 
 
 def _attribute_docs(cls: type) -> dict[str, str]:
@@ -379,7 +379,7 @@ def build_settings(
         sfm=SfmOptions(**_group(values, 'sfm')),  # type: ignore[arg-type]
         dense=DenseOptions(**_group(values, 'dense')),  # type: ignore[arg-type]
         poisson=PoissonOptions(**_group(values, 'poisson')),  # type: ignore[arg-type]
-        target=TargetSpec.parse(target_text) if target_text else None,
+        target=parse_targets(target_text),
         **recon,  # type: ignore[arg-type]
     )
     seg_values = _group(values, 'segment')

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import cv2
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
@@ -57,6 +60,69 @@ def orbit(n: int, radius: float = 2.2, height: float = 1.3, arc: float = 1.2) ->
     return [np.array([radius * np.cos(a), radius * np.sin(a), height]) for a in angles]
 
 
+@dataclass(frozen=True)
+class Decal:
+    """A printed marker lying on the ground (z = 0), its white margin around it.
+
+    Attributes:
+        image: The marker, black square edge to edge, one grey level a cell.
+        centre: Its centre (x, y) [m].
+        size: Edge of its black square [m].
+        margin: White border beyond it, in marker edges.
+
+    """
+
+    image: npt.NDArray[np.uint8]
+    centre: tuple[float, float]
+    size: float
+    margin: float = 0.25
+
+
+def marker_decal(
+    dictionary: str, marker_id: int, size: float, centre: tuple[float, float]
+) -> Decal:
+    """An ArUco or AprilTag marker as OpenCV draws it, to lay on the ground."""
+    code = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+    cells = code.markerSize + 2
+    return Decal(cv2.aruco.generateImageMarker(code, marker_id, cells), centre, size)
+
+
+def _decal_grey(decal: Decal, x: F64, y: F64) -> F64:
+    """Grey level of ground points (x, y) under the decal: paper, ink, NaN off it."""
+    u = (x - decal.centre[0]) / decal.size + 0.5
+    v = 0.5 - (y - decal.centre[1]) / decal.size
+    grey = np.full(u.shape, np.nan)
+    paper = (np.minimum(u, v) > -decal.margin) & (np.maximum(u, v) < 1 + decal.margin)
+    grey[paper] = 235.0
+    ink = paper & (np.minimum(u, v) >= 0) & (np.maximum(u, v) < 1)
+    n = decal.image.shape[0]
+    rows = np.clip((v[ink] * n).astype(int), 0, n - 1)
+    cols = np.clip((u[ink] * n).astype(int), 0, n - 1)
+    grey[ink] = np.where(decal.image[rows, cols] > 127, 235.0, 20.0)
+    return grey
+
+
+def _paint(
+    pixels: F64, points: F64, colour: F64, k: F64, rot: F64, origin: F64, decals: tuple[Decal, ...]
+) -> None:
+    """Colour ground points under each decal with its 8 x 8 sub-pixel average (anti-aliased)."""
+    on_ground = np.abs(points[:, 2]) < 1e-4
+    offsets = (np.arange(8) + 0.5) / 8 - 0.5
+    du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    k_inv = np.linalg.inv(k)
+    for decal in decals:
+        near = on_ground & np.isfinite(_decal_grey(decal, points[:, 0], points[:, 1]))
+        px = pixels[near]
+        sub = np.stack([px[:, :1] + du, px[:, 1:2] + dv, np.ones((len(px), du.size))], axis=-1)
+        dirs = (sub @ k_inv.T) @ rot
+        t = -origin[2] / dirs[..., 2]
+        grey = _decal_grey(decal, origin[0] + t * dirs[..., 0], origin[1] + t * dirs[..., 1])
+        # Sub-samples off the paper see the ground texture of the pixel's centre.
+        here = colour[near].mean(axis=1, keepdims=True)
+        grey = np.where(np.isnan(grey), here, grey).mean(axis=1)
+        colour[near] = grey[:, None]
+
+
 def render(
     mesh: o3d.geometry.TriangleMesh,
     k: F64,
@@ -64,8 +130,9 @@ def render(
     rot: F64,
     trans: F64,
     seed: int = 0,
+    decals: tuple[Decal, ...] = (),
 ) -> npt.NDArray[np.uint8]:
-    """Ray-cast an RGB image of ``mesh`` (texture from 3D position, simple shading)."""
+    """Ray-cast an RGB image of ``mesh`` (texture from 3D position, simple shading, decals)."""
     w, h = size
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
@@ -81,6 +148,7 @@ def render(
     ok = np.isfinite(t)
     pts = origin + dirs[ok] * t[ok, None]
     colour = texture(pts, seed).astype(np.float64)
+    _paint(pix[ok, :2], pts, colour, k, rot, origin, decals)
     light = np.array([0.3, 0.2, 0.93])
     shade = 0.5 + 0.5 * np.abs(normals[ok] @ light)
     img = np.zeros((h * w, 3), dtype=np.uint8)

@@ -8,11 +8,16 @@ from stockpile_ros.camera import CameraModel
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.geometry import umeyama
 from stockpile_ros.recon.scale import (
+    BarSpec,
+    MarkerSpec,
     ScaleEstimate,
     TargetSpec,
     combine,
     detect_charuco,
+    detect_markers,
     off_path,
+    parse_targets,
+    scale_from_markers,
     scale_from_odometry,
     scale_from_target,
 )
@@ -151,7 +156,90 @@ def test_odometry_scale_with_noise(noise: float) -> None:
     err = abs(est.metres_per_unit / s_true - 1)
     # Keyframe stamps are 10 ms after odometry samples: interpolation error stays small.
     assert err < 4 * est.rel_uncertainty + 0.002
-    assert est.rel_uncertainty < 3 * noise
+    fit = est.parts['fit']
+    assert fit is not None and fit < 3 * noise
+    assert est.rel_uncertainty == pytest.approx(np.hypot(fit, 0.02))
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_odometry_calibration_error_is_covered(seed: int) -> None:
+    """Wheel odometry 2 % long: the fit alone cannot see it, the stated uncertainty must."""
+    rng = np.random.default_rng(seed)
+    t_odom = np.arange(0, 10, 1 / 30)
+    path = np.column_stack(
+        [2.2 * np.cos(t_odom / 6), 2.2 * np.sin(t_odom / 6), np.full_like(t_odom, 1.2)]
+    )
+    stamps = (t_odom * 1e9).astype(np.int64)
+    s_true, rot = 0.4, _rotation(rng)
+    odom = path * 1.02 + rng.normal(0, 0.005, path.shape)
+    centres = {int(stamps[i]): path[i] @ rot / s_true for i in range(5, len(t_odom) - 5, 15)}
+    est = scale_from_odometry(centres, stamps, odom, calibration=0.02)
+    assert est is not None and est.rel_uncertainty is not None
+    error = abs(est.metres_per_unit / s_true - 1)
+    assert error == pytest.approx(0.02, abs=0.004)
+    fit = est.parts['fit']
+    assert fit is not None and fit < error / 4  # the fit alone would claim far too much
+    assert error <= 2 * est.rel_uncertainty  # a 2 sigma interval covers the actual error
+
+
+def _marker_view(cam: CameraModel, rot: np.ndarray, trans: np.ndarray, size: float) -> np.ndarray:
+    """Image of ArUco marker 3 of DICT_4X4_50 (black edge ``size``) face up at the origin."""
+    ppm = 4000.0
+    side = round(size * ppm)
+    page = np.full((2 * side, 2 * side), 255, np.uint8)
+    code = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    page[side // 2 : side // 2 + side, side // 2 : side // 2 + side] = (
+        cv2.aruco.generateImageMarker(code, 3, side)
+    )
+    half = side / ppm - 0.5 / ppm
+    to_world = np.array([[1 / ppm, 0, -half], [0, -1 / ppm, half], [0, 0, 1]])
+    h = cam.k @ np.column_stack([rot[:, 0], rot[:, 1], trans]) @ to_world
+    img = cv2.warpPerspective(page, h, (cam.width, cam.height), flags=cv2.INTER_AREA,
+                              borderValue=160)  # fmt: skip
+    return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+
+
+def test_marker_scale_from_known_cameras() -> None:
+    cam = CameraModel.from_fov(960, 540, 60.0)
+    spec = parse_targets('aruco:4x4_50:3:0.2')
+    s_true = 0.37
+    detections, poses = {}, {}
+    for i, angle in enumerate(np.linspace(-0.5, 0.5, 6)):
+        c = np.array([np.sin(angle), -np.cos(angle), 0.9])
+        rot, trans = _look_at(c, np.zeros(3))
+        found = detect_markers(_marker_view(cam, rot, trans, 0.2), ['DICT_4X4_50'])
+        assert list(found) == [('DICT_4X4_50', 3)]
+        detections[f'v{i}'] = found
+        poses[f'v{i}'] = (cam, rot, trans / s_true)
+    est = scale_from_markers(detections, poses, [t for t in spec if not isinstance(t, TargetSpec)])
+    assert est is not None
+    assert est.metres_per_unit == pytest.approx(s_true, rel=0.003)
+    assert est.parts['detections'] is not None and est.parts['printed_size'] == 0.0
+    # A marker the spec does not name gives nothing.
+    other = parse_targets('aruco:DICT_4X4_50:4:0.2')
+    assert scale_from_markers(detections, poses, other) is None  # type: ignore[arg-type]
+
+
+def test_parse_targets() -> None:
+    many = parse_targets(
+        'aruco:DICT_4X4_50:3:0.15, apriltag:36h11:*:0.1,bar:DICT_5X5_100:1:2:1.0,'
+        'charuco:5x4:0.1:0.075'
+    )
+    assert many[0] == MarkerSpec('DICT_4X4_50', 3, 0.15)
+    assert many[1] == MarkerSpec('DICT_APRILTAG_36h11', None, 0.1)
+    assert many[2] == BarSpec('DICT_5X5_100', 1, 2, 1.0)
+    assert many[3] == SPEC
+    assert parse_targets('') == ()
+    for bad, why in (
+        ('aruco:DICT_4X4_50:50:0.1', 'ids 0 to 49'),
+        ('aruco:DICT_NOPE:1:0.1', 'unknown'),
+        ('aruco:DICT_4X4_50:1:150', 'outside'),
+        ('bar:DICT_4X4_50:1:1:1', 'two different'),
+        ('aruco:DICT_4X4_50:1:0.1,aruco:DICT_4X4_50:1:0.2', 'two sizes'),
+        ('marker:1', 'expected'),
+    ):
+        with pytest.raises(StockpileError, match=why):
+            parse_targets(bad)
 
 
 def test_odometry_needs_a_path() -> None:

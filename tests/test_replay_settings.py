@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from stockpile_ros.errors import StockpileError
+from stockpile_ros.recon.scale import TargetSpec
 from stockpile_ros.recon.sfm import SfmOptions
 from stockpile_ros.settings import (
     EFFECTIVE_PARAMS,
@@ -39,7 +40,7 @@ def test_every_number_has_a_range_holding_its_default_and_every_setting_a_descri
     by_name = {s.name: s for s in SETTINGS}
     assert 'whatever the displacement' in by_name['selector.min_tracked'].description
     # Choices come from the Literal type of the dataclass field.
-    assert by_name['sfm.matcher'].choices == ('sequential', 'exhaustive')
+    assert by_name['sfm.matcher'].choices == ('auto', 'sequential', 'exhaustive')
     assert by_name['sfm.mapper'].choices == ('incremental', 'global')
     assert by_name['measure.completion'].choices == ('auto', 'mirror', 'ground', 'hull')
     # Ranges come from the Range marker next to the field.
@@ -106,7 +107,7 @@ def test_checks_names_types_ranges_and_choices() -> None:
 def test_options_built_from_values() -> None:
     s = build_settings({'recon.target': 'charuco:5x4:0.08:0.06', 'poisson.depth': 8,
                         'gradation.spec_class': 'III', 'work_dir': '/tmp/x'})  # fmt: skip
-    assert s.recon.target is not None and s.recon.target.squares_x == 5
+    assert isinstance(s.recon.target[0], TargetSpec) and s.recon.target[0].squares_x == 5
     assert s.recon.poisson.depth == 8
     assert s.spec_class == 'III' and s.class_table is None
     assert s.work_dir == Path('/tmp/x')
@@ -173,7 +174,10 @@ def test_every_float_setting_refuses_nan_and_infinity(bad: float) -> None:
 def test_check_value_names_the_parameter_the_value_and_what_is_allowed() -> None:
     with pytest.raises(StockpileError) as info:
         check_value('sfm.matcher', 'bogus')
-    assert str(info.value) == "parameter sfm.matcher: 'bogus' is not one of sequential, exhaustive"
+    assert (
+        str(info.value)
+        == "parameter sfm.matcher: 'bogus' is not one of auto, sequential, exhaustive"
+    )
     with pytest.raises(StockpileError, match=r'selector.blur_ratio: 1.5 is outside \[0, 1\]'):
         check_value('selector.blur_ratio', 1.5)
     with pytest.raises(StockpileError, match=r'recon\.target: .*at least 2 x 2 squares'):

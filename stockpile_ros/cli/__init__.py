@@ -20,7 +20,7 @@ __all__ = ['COMMANDS', 'build_parser', 'main']
 # Subcommand -> one-line help, in the order --help lists them.
 COMMANDS = {
     'info': 'summarise a ROS 2 bag: topics, images, camera_info, odometry, problems',
-    'replay': 'replay a bag through the node set: keyframes, reconstruction, rocks, output MCAP',
+    'replay': 'measure the rocks of a bag (through the node set), a folder of photos or a video',
     'reconstruct': 'reconstruct a metric, gravity-aligned Poisson mesh from a bag, photos or video',
     'segment': 'segment a stockpile mesh into rocks and report sizes, shapes and gradation',
     'simulate': 'render a ROS 2 bag of a synthetic rock pile with its ground truth',

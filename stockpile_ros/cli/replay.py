@@ -1,4 +1,4 @@
-"""``stockpile replay``: a recorded bag through the node set's components, into an output MCAP."""
+"""``stockpile replay``: bags through the node set's components, photos and video alike."""
 
 from __future__ import annotations
 
@@ -6,18 +6,28 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..recon.sources import source_kind
 from ..replay import ReplaySummary, replay
 from .parameters import add_parameter_arguments, add_run_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
-DESCRIPTION = """Replay a recorded ROS 2 bag through the same components the nodes run: frames in
+DESCRIPTION = """Measure the rocks of SOURCE: a ROS 2 bag, a folder of photos (JPEG, PNG, HEIC)
+or a video file.
+
+A bag is replayed through the same components the nodes run: frames in
 bag order through the keyframe selector, the reconstruction at every recorded trigger
 (std_msgs/Empty on stockpile/trigger) or once at the end, then segmentation and measurement.
 
 Writes OUT/work/ (keyframes, sparse, dense, mesh), OUT/result/ (report.json, rocks.csv, ...)
 and OUT/replay.mcap, a bag with every topic the nodes publish plus the input camera, camera
 info and transforms, for Foxglove (dashboards/foxglove_layout.json) or RViz.
+
+Photos and video have no ROS stream: every sharp photo (the keyframe selector for a video) becomes
+a keyframe in OUT/work/, then the same reconstruction and segmentation write OUT/result/; no
+output bag is written. Photos are matched as an unordered set, with the focal length of their EXIF
+as the camera's starting point. Without a target (--set recon.target=aruco:DICT_4X4_50:0:0.15,
+docs/field_capture.md) the sizes are in model units, not metres.
 
 Parameters are those of the nodes (config/stockpile.yaml); --set overrides one, e.g.
 --set sfm.max_features=2048 --set gradation.spec_class=III. The exit status is 0 when a result
@@ -27,9 +37,13 @@ and written as diagnostics into the output bag)."""
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add this subcommand's arguments."""
-    parser.add_argument('bag', type=Path, help='ROS 2 bag (folder, .mcap or .db3)')
+    parser.add_argument(
+        'source', type=Path, help='ROS 2 bag (folder, .mcap or .db3), folder of photos or video'
+    )
     parser.add_argument('--out', type=Path, required=True, help='output folder')
-    parser.add_argument('--topic', help='image topic (default: the one with most messages)')
+    parser.add_argument(
+        '--topic', help='image topic of a bag (default: the one with most messages)'
+    )
     add_parameter_arguments(parser)
     add_run_arguments(parser, 'OUT')
 
@@ -49,12 +63,17 @@ def _print_summary(s: ReplaySummary) -> None:
         scale = s.report['scale']
         rel = scale.get('rel_uncertainty')
         unc = '' if rel is None else f' +/- {100 * rel:.1f} %'
-        print(f'scale: {scale.get("method")}{unc}')
+        metric = scale.get('method') != 'none'
+        note = '' if metric else ': every size is in model units, not metres'
+        print(f'scale: {scale.get("method")}{unc}{note}')
         g = s.report['gradation']
-        d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} m'
+        unit = 'm' if metric else 'model units'
+        d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} {unit}'
         print(f'{len(s.report["rocks"])} rocks, D50 {d50}')
         spec = g.get('spec') or {}
-        if spec.get('checked'):
+        if spec.get('checked') and not metric:
+            print(f'class {spec.get("class")}: no verdict, the sizes are not in metres')
+        elif spec.get('checked'):
             reasons = '; '.join(spec.get('reasons', []))
             verdict = 'PASS' if spec.get('passed') else f'FAIL: {reasons}'
             print(f'class {spec.get("class")}: {verdict}')
@@ -67,7 +86,18 @@ def _print_summary(s: ReplaySummary) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    summary = replay(args.bag, args.out, settings_from_args(args), args.topic,
+    settings = settings_from_args(args)
+    if source_kind(args.source) != 'bag':
+        from ..photos import replay_source, summary_lines
+
+        photos = replay_source(args.source, args.out, settings)
+        out, err = summary_lines(photos)
+        for line in err:
+            print(line, file=sys.stderr)
+        for line in out:
+            print(line)
+        return 0 if photos.ok else 1
+    summary = replay(args.source, args.out, settings, args.topic,
                      resume=args.resume, fresh=args.fresh)  # fmt: skip
     _print_summary(summary)
     return 0 if summary.ok else 1

@@ -26,20 +26,28 @@ from ..progress import progress
 from ..ranges import Range
 from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
+from .exif import read_intrinsics
 from .gates import GateOptions, registration_gate
 from .ground import fit_ground, pile_mask, stockpile_transform
 from .keyframes import KeyframeStore, SelectorOptions
 from .scale import (
+    BarSpec,
+    MarkerDetections,
+    MarkerSpec,
     ScaleEstimate,
+    Target,
     TargetSpec,
     combine,
     detect_charuco,
+    detect_markers,
     off_path,
+    pool_targets,
+    scale_from_markers,
     scale_from_odometry,
     scale_from_target,
 )
 from .sfm import SfmOptions, SparseModel, load_sparse, run_sfm
-from .sources import iter_frames, source_kind
+from .sources import iter_frames, photo_files, source_kind
 from .surface import PoissonOptions, poisson_surface
 
 __all__ = [
@@ -71,8 +79,18 @@ class ReconOptions:
         dense: Dense stereo.
         gate: The registration gate after Structure-from-Motion.
         poisson: Surface.
-        target: The ChArUco board in view, None when there is none.
+        target: The scale targets in view, '' for none (sizes in metres):
+            aruco:DICT:ID:SIZE_M (one marker, the edge of its black square),
+            aruco:DICT:*:SIZE_M (every marker of the dictionary), apriltag:36h11:ID:SIZE_M,
+            bar:DICT:ID1:ID2:DIST_M (two markers whose centres are DIST_M apart) or
+            charuco:SXxSY:SQUARE_M:MARKER_M[:DICT]; several joined by commas.
         use_odometry: Scale from the bag's odometry when it has some.
+        odometry_scale_uncertainty: Relative standard deviation of the odometry's own scale
+            (wheel radius, tyre pressure, slip; 1-2 % for wheel odometry), added in quadrature
+            to the fit's: the fit against the SfM path cannot see it.
+        target_size_uncertainty: Relative standard deviation of a printed marker's or bar's
+            true size, added in quadrature to the spread of its detections (0.3 %: a 150 mm
+            marker checked with a ruler to 0.5 mm).
         odometry_tolerance: Odometry is not used for the scale when the keyframe path, scaled
             onto it, differs from it by more than this share of its extent (rms). A keyframe
             further than this share from where odometry puts it, after the fit to the others, is
@@ -94,8 +112,10 @@ class ReconOptions:
     dense: DenseOptions = field(default_factory=DenseOptions)
     gate: GateOptions = field(default_factory=GateOptions)
     poisson: PoissonOptions = field(default_factory=PoissonOptions)
-    target: TargetSpec | None = None
+    target: tuple[Target, ...] = ()
     use_odometry: bool = True
+    odometry_scale_uncertainty: Annotated[float, Range(0.0, 0.5)] = 0.02
+    target_size_uncertainty: Annotated[float, Range(0.0, 0.2)] = 0.003
     crop_radius: Annotated[float, Range(0.0, 100.0)] = 1.5
     odometry_tolerance: Annotated[float, Range(0.0, 10.0)] = 0.05
     max_image_pixels: Annotated[int, Range(10_000, 1_000_000_000)] = DEFAULT_MAX_PIXELS
@@ -116,6 +136,11 @@ class WorkFolder:
     def keyframes(self) -> Path:
         """PNG keyframes and ``keyframes.jsonl``: what the reconstruction runs on."""
         return self.root / 'keyframes'
+
+    @property
+    def photos(self) -> Path:
+        """``photos.json``: each photo of a photo folder, its keyframe and EXIF intrinsics."""
+        return self.root / 'photos.json'
 
     @property
     def sparse(self) -> Path:
@@ -176,6 +201,8 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
             f'no keyframe was kept out of {seen} frames (rejections: {reasons})',
             'Check that the source holds sharp images of the pile',
         )
+    if kind == 'photos':
+        _write_photos(source, work, store)
     return {
         'frames': seen,
         'keyframes': len(store.records),
@@ -184,11 +211,31 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
     }
 
 
+def _write_photos(source: Path, work: WorkFolder, store: KeyframeStore) -> None:
+    """Write ``photos.json``: every photo, the keyframe it became (None when rejected), its EXIF."""
+    keyframe_of = {r.index: r.file for r in store.records}
+    photos = []
+    for index, path in enumerate(photo_files(source)):
+        photos.append({**read_intrinsics(path).as_dict(), 'keyframe': keyframe_of.get(index)})
+    info = {'schema': 'stockpile-photos/1', 'source': str(source), 'photos': photos}
+    work.photos.write_text(json.dumps(info, indent=1) + '\n')
+
+
+def photo_names(work: WorkFolder) -> dict[str, str]:
+    """Photo file name by keyframe name (empty when the keyframes are not from photos)."""
+    if not work.photos.exists():
+        return {}
+    photos = json.loads(work.photos.read_text())['photos']
+    return {p['keyframe']: p['file'] for p in photos if p['keyframe']}
+
+
 def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
     """Structure-from-Motion of the stored keyframes into ``work.sparse``, then the gate.
 
-    The registration gate's report is added to ``sparse.json`` (``gate``) whether it passes or
-    not, so that the dense stage, run on its own later, refuses a model that failed it.
+    Keyframes from photos (``photos.json``) are an unordered set, with their EXIF focal lengths
+    as the prior. The registration gate's report is added to ``sparse.json`` (``gate``) whether
+    it passes or not, so that the dense stage, run on its own later, refuses a model that failed
+    it.
 
     Raises:
         CaptureError: Structure-from-Motion failed, or its model failed the registration gate
@@ -197,14 +244,29 @@ def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
 
     """
     store = KeyframeStore(work.keyframes)
-    report = run_sfm(work.keyframes, store.records, work.sparse, options.sfm)
+    noun = 'keyframes'
+    if not work.photos.exists():
+        report = run_sfm(work.keyframes, store.records, work.sparse, options.sfm)
+    else:
+        noun = 'photos'
+        photos = json.loads(work.photos.read_text())['photos']
+        priors = {
+            p['keyframe']: float(p['focal_px']) for p in photos if p['keyframe'] and p['focal_px']
+        }
+        report = run_sfm(work.keyframes, store.records, work.sparse, options.sfm,
+                         priors=priors, unordered=True)  # fmt: skip
+        names = photo_names(work)
+        for entry in report['model_images']:
+            entry['photos'] = [names.get(n, n) for n in entry['images']]
+        report['unregistered_photos'] = [names.get(n, n) for n in report['unregistered']]
     model = load_sparse(work.sparse)
     gate = registration_gate(
         [r.file for r in store.records],
-        report['model_images'],
+        [entry['images'] for entry in report['model_images']],
         options.gate,
         centres={name: view.center for name, view in model.views.items()},
         pile_centre=np.median(model.points, axis=0) if len(model.points) else None,
+        noun=noun,
     )
     report['gate'] = gate.as_dict()
     (work.sparse / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
@@ -276,6 +338,54 @@ def on_path(
     return (replace(model, views=views) if dropped else model), dropped
 
 
+def _target_scale(
+    store: KeyframeStore, model: SparseModel, options: ReconOptions
+) -> tuple[ScaleEstimate | None, dict[str, Any]]:
+    """Scale from the boards and markers of ``options.target``, pooled, with what each gave."""
+    boards = [t for t in options.target if isinstance(t, TargetSpec)]
+    markers = [t for t in options.target if isinstance(t, (MarkerSpec, BarSpec))]
+    dictionaries = [t.dictionary for t in markers]
+    board_hits: list[dict[str, tuple[npt.NDArray[np.int64], F64]]] = [{} for _ in boards]
+    marker_hits: dict[str, MarkerDetections] = {}
+    for record in store.records:
+        if record.file not in model.views:
+            continue
+        image = store.image(record)
+        for board, hits in zip(boards, board_hits, strict=True):
+            ids, px = detect_charuco(image, board)
+            if len(ids):
+                hits[record.file] = (ids, px)
+        if markers:
+            found = detect_markers(image, dictionaries)
+            if found:
+                marker_hits[record.file] = found
+    poses = {n: (v.camera, v.rotation, v.translation) for n, v in model.views.items()}
+    estimates: dict[str, ScaleEstimate] = {}
+    details: dict[str, Any] = {}
+    for i, (board, hits) in enumerate(zip(boards, board_hits, strict=True)):
+        estimate = scale_from_target(hits, poses, board)
+        name = f'charuco {i}' if len(boards) > 1 else 'charuco'
+        details[name] = {'views_with_corners': len(hits),
+                         'estimate': None if estimate is None else estimate.__dict__}  # fmt: skip
+        if estimate is not None:
+            estimates[name] = estimate
+    if markers:
+        estimate = scale_from_markers(marker_hits, poses, markers,
+                                      size_uncertainty=options.target_size_uncertainty)  # fmt: skip
+        seen = sorted({f'{d}:{m}' for hits in marker_hits.values() for d, m in hits})
+        details['markers'] = {
+            'specs': [t.text() for t in markers],
+            'views_with_markers': len(marker_hits),
+            'markers_seen': seen,
+            'estimate': None if estimate is None else estimate.__dict__,
+        }
+        if estimate is not None:
+            estimates['markers'] = estimate
+    pooled = pool_targets(estimates)
+    details['views'] = len(model.views)
+    return pooled, details
+
+
 def estimate_scale(
     work: WorkFolder, model: SparseModel, options: ReconOptions
 ) -> tuple[ScaleEstimate, dict[str, Any]]:
@@ -283,19 +393,8 @@ def estimate_scale(
     store = KeyframeStore(work.keyframes)
     details: dict[str, Any] = {}
     target = None
-    if options.target is not None:
-        detections = {}
-        for record in store.records:
-            if record.file in model.views:
-                ids, px = detect_charuco(store.image(record), options.target)
-                if len(ids):
-                    detections[record.file] = (ids, px)
-        poses = {n: (v.camera, v.rotation, v.translation) for n, v in model.views.items()}
-        target = scale_from_target(detections, poses, options.target)
-        details['target'] = {
-            'views_with_corners': len(detections),
-            'estimate': None if target is None else target.__dict__,
-        }
+    if options.target:
+        target, details['target'] = _target_scale(store, model, options)
     odometry = None
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
@@ -306,8 +405,9 @@ def estimate_scale(
             details['odometry'] = {'keyframes_without_camera_pose': unplaced}
         if names:
             odometry = scale_from_odometry(
-                dict(zip(stamps.tolist(), centres, strict=True)), stamps, positions
-            )
+                dict(zip(stamps.tolist(), centres, strict=True)), stamps, positions,
+                calibration=options.odometry_scale_uncertainty,
+            )  # fmt: skip
             details['odometry'] = {
                 'keyframes': len(names),
                 'keyframes_without_camera_pose': unplaced,
@@ -430,6 +530,8 @@ def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
             'method': scale.method,
             'metres_per_unit': scale.metres_per_unit,
             'rel_uncertainty': scale.rel_uncertainty,
+            'parts': scale.parts,
+            'note': scale.note,
         },
         'scale_details': {**scale_details, 'note': scale.note},
         'ground_plane_model': [float(v) for v in ground.plane],

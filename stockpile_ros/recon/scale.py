@@ -1,17 +1,26 @@
-"""Metric scale of an SfM model: from a ChArUco target of known size, from odometry, or both.
+"""Metric scale of an SfM model: from printed targets of known size, from odometry, or both.
 
-Target: ChArUco corners are detected in the keyframes, triangulated with the SfM poses (linear,
-every view that saw a corner) and fitted to the board's known corner layout with a similarity
-(Umeyama); its scale is metres per model unit. Odometry: keyframe centres are fitted the same way to
-the odometry positions at the keyframe stamps. Relative uncertainties come from a bootstrap over the
-points of each fit. Both are combined by inverse-variance weighting of the log scales.
+Targets (:func:`parse_targets`): ChArUco boards, single ArUco or AprilTag markers of a known
+black-square edge, every marker of a dictionary at one size, and scale bars (two markers a known
+distance apart), several at once. Their corners are detected in the keyframes, triangulated with
+the SfM poses (linear, every registered view that saw a corner) and compared with their known
+geometry: a board by a similarity fit to its corner layout (uncertainty from a bootstrap over its
+corners), markers and bars by the ratio of known to triangulated lengths (uncertainty from the
+spread of the detections: leave-one-view-out over the views, and across markers when there are
+several), each with the printed size's own tolerance in quadrature.
+
+Odometry: keyframe centres are fitted to the odometry positions at the keyframe stamps; its
+uncertainty is the fit's bootstrap spread and the odometry's own calibration uncertainty (a wheel
+radius off by 1-2 % scales the whole path and cannot be seen from the fit) in quadrature.
+Target and odometry are combined by inverse-variance weighting of the log scales.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TypeAlias
 
 import cv2
 import numpy as np
@@ -22,12 +31,21 @@ from ..errors import StockpileError
 from ..geometry import umeyama
 
 __all__ = [
+    'BarSpec',
+    'MarkerDetections',
+    'MarkerSpec',
     'ScaleEstimate',
+    'Target',
     'TargetSpec',
     'bootstrap_scale',
     'combine',
     'detect_charuco',
+    'detect_markers',
+    'dictionary_code',
     'off_path',
+    'parse_targets',
+    'pool_targets',
+    'scale_from_markers',
     'scale_from_odometry',
     'scale_from_target',
     'triangulate',
@@ -109,6 +127,150 @@ class TargetSpec:
         return np.asarray(self.board().getChessboardCorners(), dtype=np.float64).reshape(-1, 3)
 
 
+def dictionary_code(name: str, text: str) -> tuple[str, int]:
+    """OpenCV's name and code of an ArUco or AprilTag dictionary, ``DICT_`` prefix optional.
+
+    Args:
+        name: As written, e.g. ``DICT_4X4_50``, ``4x4_50`` or ``APRILTAG_36h11``.
+        text: The spec it comes from, for the message.
+
+    Raises:
+        StockpileError: cv2.aruco has no such dictionary.
+
+    """
+    wanted = name.upper() if name.upper().startswith('DICT_') else 'DICT_' + name.upper()
+    names = sorted(a for a in dir(cv2.aruco) if a.upper() == wanted and a.startswith('DICT_'))
+    codes = [getattr(cv2.aruco, a) for a in names]
+    if not names or not isinstance(codes[0], int):
+        raise StockpileError(
+            f'target {text!r}: unknown marker dictionary {name} (a DICT_ name of cv2.aruco, e.g. '
+            'DICT_4X4_50, DICT_6X6_250 or DICT_APRILTAG_36h11)'
+        )
+    # Both spellings OpenCV offers (DICT_APRILTAG_36H11, DICT_APRILTAG_36h11) are one code.
+    chosen = name if name in names else 'DICT_' + name if 'DICT_' + name in names else names[0]
+    return chosen, int(codes[0])
+
+
+def _dictionary_size(code: int) -> int:
+    return len(cv2.aruco.getPredefinedDictionary(code).bytesList)
+
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """Single square markers (ArUco or AprilTag) of one dictionary with a known size.
+
+    Attributes:
+        dictionary: OpenCV dictionary name, e.g. ``"DICT_4X4_50"`` or ``"DICT_APRILTAG_36h11"``.
+        marker_id: The marker's id; None for every marker of the dictionary.
+        size: Edge of the black square (the marker's outer border) [m].
+
+    """
+
+    dictionary: str
+    marker_id: int | None
+    size: float
+
+    def text(self) -> str:
+        """Return the spec string (as :func:`parse_targets` reads it)."""
+        mark = '*' if self.marker_id is None else str(self.marker_id)
+        return f'aruco:{self.dictionary}:{mark}:{self.size:g}'
+
+
+@dataclass(frozen=True)
+class BarSpec:
+    """A scale bar: two markers of one dictionary whose centres lie a known distance apart.
+
+    Attributes:
+        dictionary: OpenCV dictionary name.
+        first: Id of one marker.
+        second: Id of the other.
+        distance: Distance between the two markers' centres [m].
+
+    """
+
+    dictionary: str
+    first: int
+    second: int
+    distance: float
+
+    def text(self) -> str:
+        """Return the spec string (as :func:`parse_targets` reads it)."""
+        return f'bar:{self.dictionary}:{self.first}:{self.second}:{self.distance:g}'
+
+
+Target: TypeAlias = TargetSpec | MarkerSpec | BarSpec
+"""One scale target of a spec string."""
+
+_TARGET_FORMS = (
+    'aruco:DICT:ID:SIZE_M, aruco:DICT:*:SIZE_M, apriltag:36h11:ID:SIZE_M, '
+    'bar:DICT:ID1:ID2:DIST_M or charuco:SXxSY:SQUARE_M:MARKER_M[:DICT], several joined by commas'
+)
+
+
+def _length(value: str, what: str, text: str) -> float:
+    try:
+        length = float(value)
+    except ValueError:
+        raise StockpileError(f'target {text!r}: {what} {value!r} is not a number') from None
+    # Anything from a 1 cm tag to a 100 m survey bar; outside that it is a typo (mm for m).
+    if not 0.01 <= length <= 100.0:
+        raise StockpileError(f'target {text!r}: {what} {value} m is outside [0.01, 100] m')
+    return length
+
+
+def _marker_id(value: str, code: int, dictionary: str, text: str) -> int:
+    if not value.isdigit():
+        raise StockpileError(f'target {text!r}: marker id {value!r} is not a whole number')
+    size = _dictionary_size(code)
+    if int(value) >= size:
+        raise StockpileError(f'target {text!r}: {dictionary} has ids 0 to {size - 1} only')
+    return int(value)
+
+
+def _parse_one(text: str) -> Target:
+    parts = text.split(':')
+    kind = parts[0].lower()
+    if kind == 'charuco':
+        return TargetSpec.parse(text)
+    if kind in ('aruco', 'apriltag') and len(parts) == 4:
+        name = parts[1] if kind == 'aruco' else f'APRILTAG_{parts[1]}'
+        dictionary, code = dictionary_code(name, text)
+        marker = None if parts[2] == '*' else _marker_id(parts[2], code, dictionary, text)
+        return MarkerSpec(dictionary, marker, _length(parts[3], 'marker size', text))
+    if kind == 'bar' and len(parts) == 5:
+        dictionary, code = dictionary_code(parts[1], text)
+        first = _marker_id(parts[2], code, dictionary, text)
+        second = _marker_id(parts[3], code, dictionary, text)
+        if first == second:
+            raise StockpileError(f'target {text!r}: a bar needs two different markers')
+        return BarSpec(dictionary, first, second, _length(parts[4], 'bar length', text))
+    raise StockpileError(f'target {text!r}: expected {_TARGET_FORMS}')
+
+
+def parse_targets(text: str) -> tuple[Target, ...]:
+    """Parse a target spec string: one or more targets joined by commas ('' gives none).
+
+    Forms: ``aruco:DICT:ID:SIZE_M`` (one marker, its black square's edge in metres),
+    ``aruco:DICT:*:SIZE_M`` (every marker of the dictionary, one size),
+    ``apriltag:FAMILY:ID:SIZE_M`` (the same as ``aruco:DICT_APRILTAG_FAMILY:...``),
+    ``bar:DICT:ID1:ID2:DIST_M`` (two markers whose centres are DIST_M apart) and
+    ``charuco:SXxSY:SQUARE_M:MARKER_M[:DICT]``.
+
+    Raises:
+        StockpileError: A part does not follow those forms, names an unknown dictionary or an id
+            past its end, or the same marker twice with different sizes.
+
+    """
+    targets = tuple(_parse_one(part.strip()) for part in text.split(',') if part.strip())
+    sizes: dict[tuple[str, int | None], float] = {}
+    for target in targets:
+        if isinstance(target, MarkerSpec):
+            key = (target.dictionary, target.marker_id)
+            if sizes.setdefault(key, target.size) != target.size:
+                raise StockpileError(f'target {text!r}: {target.text()} is given two sizes')
+    return targets
+
+
 @dataclass(frozen=True)
 class ScaleEstimate:
     """Metres per model unit.
@@ -120,6 +282,9 @@ class ScaleEstimate:
         points: Number of points the fit used.
         rms_residual: Root mean square residual of the fit [m].
         note: A warning about the estimate, empty when none.
+        parts: The relative uncertainties ``rel_uncertainty`` is made of, by name (``fit`` and
+            ``calibration`` for odometry; ``detections``, ``markers`` and ``printed_size`` for
+            markers; ``target`` and ``odometry`` when both are combined).
 
     """
 
@@ -129,6 +294,7 @@ class ScaleEstimate:
     points: int = 0
     rms_residual: float = 0.0
     note: str = ''
+    parts: dict[str, float | None] = field(default_factory=dict)
 
 
 def bootstrap_scale(src: F64, dst: F64, rounds: int = 200, seed: int = 0) -> float | None:
@@ -272,6 +438,190 @@ def scale_from_target(
     return ScaleEstimate('target', sim.scale, bootstrap_scale(src, dst), len(src), rms)
 
 
+MarkerDetections: TypeAlias = dict[tuple[str, int], F64]
+"""Marker corners in one image: 4x2 pixels (OpenCV order and convention) by (dictionary, id)."""
+
+
+def detect_markers(image: npt.NDArray[np.uint8], dictionaries: Sequence[str]) -> MarkerDetections:
+    """Corners of the markers of ``dictionaries`` in one image, refined to sub-pixel.
+
+    A marker id found twice in one image (two prints of one id) is left out: which corner
+    belongs to which print cannot be told.
+    """
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    params = cv2.aruco.DetectorParameters()
+    # Sub-pixel corners: the scale is a ratio of lengths between corners.
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    out: MarkerDetections = {}
+    for name in dict.fromkeys(dictionaries):
+        detector = cv2.aruco.ArucoDetector(
+            cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)), params
+        )
+        corners, ids, _ = detector.detectMarkers(grey)
+        if ids is None:
+            continue
+        found = [int(i) for i in np.asarray(ids).ravel()]
+        for marker, quad in zip(found, corners, strict=True):
+            if found.count(marker) == 1:
+                out[(name, marker)] = np.asarray(quad, dtype=np.float64).reshape(4, 2)
+    return out
+
+
+_Poses = Mapping[str, tuple[CameraModel, F64, F64]]
+
+
+def _marker_corners(
+    detections: Mapping[str, MarkerDetections], poses: _Poses, min_views: int, leave_out: str
+) -> dict[tuple[str, int], F64]:
+    """Triangulated 4x3 corners of each marker whose four corners were all triangulated."""
+    seen: dict[tuple[str, int], list[list[tuple[CameraModel, F64, F64, F64]]]] = {}
+    for name, markers in detections.items():
+        if name not in poses or name == leave_out:
+            continue
+        cam, rot, trans = poses[name]
+        for key, quad in markers.items():
+            views = seen.setdefault(key, [[], [], [], []])
+            for corner in range(4):
+                views[corner].append((cam, rot, trans, quad[corner]))
+    out = {}
+    for key, views in seen.items():
+        if len(views[0]) < min_views:
+            continue
+        points = [triangulate(obs) for obs in views]
+        if all(p is not None for p in points):
+            out[key] = np.array(points, dtype=np.float64)
+    return out
+
+
+# Edges, then diagonals, of a marker's four corners (OpenCV's clockwise order).
+_PAIRS = ((0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3))
+_FACTORS = np.array([1.0, 1.0, 1.0, 1.0, math.sqrt(2.0), math.sqrt(2.0)])
+
+# A marker whose six lengths disagree by more than this (relative std) is not a flat square in
+# the model: a corner on the wrong spot, a bent print. It is left out of the scale.
+_MAX_SHAPE_SPREAD = 0.05
+
+
+def _marker_lengths(
+    corners: Mapping[tuple[str, int], F64], specs: Sequence[MarkerSpec | BarSpec]
+) -> tuple[dict[str, tuple[F64, F64]], list[str]]:
+    """Known [m] and model lengths per target unit (a marker or a bar), and rejected markers."""
+    sizes = {(s.dictionary, s.marker_id): s.size for s in specs if isinstance(s, MarkerSpec)}
+    units: dict[str, tuple[F64, F64]] = {}
+    rejected = []
+    for (name, marker), quad in sorted(corners.items()):
+        size = sizes.get((name, marker), sizes.get((name, None)))
+        if size is None:
+            continue
+        model = np.array([np.linalg.norm(quad[i] - quad[j]) for i, j in _PAIRS])
+        ratios = size * _FACTORS / np.maximum(model, 1e-12)
+        if np.std(ratios) > _MAX_SHAPE_SPREAD * np.mean(ratios):
+            rejected.append(f'{name}:{marker}')
+            continue
+        units[f'{name}:{marker}'] = (size * _FACTORS, model)
+    for spec in specs:
+        if isinstance(spec, BarSpec):
+            ends = [corners.get((spec.dictionary, m)) for m in (spec.first, spec.second)]
+            if ends[0] is not None and ends[1] is not None:
+                model_length = float(np.linalg.norm(ends[0].mean(axis=0) - ends[1].mean(axis=0)))
+                units[spec.text()] = (np.array([spec.distance]), np.array([model_length]))
+    return units, rejected
+
+
+def _log_scale(units: Mapping[str, tuple[F64, F64]]) -> tuple[float, dict[str, float]]:
+    """Weighted mean log scale over the units and each unit's log scale.
+
+    A unit's relative error goes as corner noise over its length, so each weighs as its mean
+    model length squared: a 1 m bar counts more than a 10 cm marker.
+    """
+    logs = {u: math.log(float(k.sum() / m.sum())) for u, (k, m) in units.items()}
+    weights = {u: float(np.mean(m)) ** 2 for u, (_, m) in units.items()}
+    total = sum(weights.values())
+    return sum(weights[u] * logs[u] for u in logs) / total, logs
+
+
+def scale_from_markers(
+    detections: Mapping[str, MarkerDetections],
+    poses: _Poses,
+    specs: Sequence[MarkerSpec | BarSpec],
+    *,
+    min_views: int = 3,
+    size_uncertainty: float = 0.0,
+) -> ScaleEstimate | None:
+    """Scale from markers and scale bars of known size, triangulated with the SfM poses.
+
+    Each marker seen in at least ``min_views`` registered views gets its four corners
+    triangulated; its four edges and two diagonals against the known size give its scale, a bar
+    the distance between its two markers' centres. The estimate is the weighted mean over them.
+    Its uncertainty comes from the detections: the leave-one-view-out (jackknife) spread of the
+    estimate and, with several markers or bars, their spread over the square root of their
+    number, whichever is larger; ``size_uncertainty`` (how well the printed size is known) is
+    added in quadrature.
+
+    Args:
+        detections: Marker corners per keyframe name (:func:`detect_markers`).
+        poses: Camera, world-to-camera rotation and translation per registered keyframe name.
+        specs: The markers and bars.
+        min_views: Fewest views a marker must be seen in.
+        size_uncertainty: Relative uncertainty of the printed sizes.
+
+    Returns:
+        The estimate, or None when no marker or bar was seen well enough.
+
+    """
+    corners = _marker_corners(detections, poses, min_views, '')
+    units, rejected = _marker_lengths(corners, specs)
+    if not units:
+        return None
+    log_s, logs = _log_scale(units)
+    scale = math.exp(log_s)
+    # Leave each view out in turn: how much the estimate rests on any one view's detections.
+    replicates = []
+    for name in sorted(n for n in detections if n in poses and detections[n]):
+        again, _ = _marker_lengths(_marker_corners(detections, poses, min_views, name), specs)
+        if set(again) == set(units):
+            replicates.append(_log_scale(again)[0])
+    n = len(replicates)
+    jackknife = None
+    if n >= 3:
+        mean = float(np.mean(replicates))
+        jackknife = math.sqrt((n - 1) / n * sum((r - mean) ** 2 for r in replicates))
+    spread = None
+    if len(logs) >= 2:
+        spread = float(np.std(list(logs.values()), ddof=1)) / math.sqrt(len(logs))
+    known = [d for d in (jackknife, spread) if d is not None]
+    detection = max(known) if known else None
+    rel = None if detection is None else math.hypot(detection, size_uncertainty)
+    residuals = np.concatenate([scale * m - k for k, m in units.values()])
+    note = f'markers not square in the model, left out: {", ".join(rejected)}' if rejected else ''
+    return ScaleEstimate(
+        'target', scale, rel, 4 * len(corners), float(np.sqrt(np.mean(residuals**2))), note,
+        {'detections': jackknife, 'markers': spread, 'printed_size': size_uncertainty},
+    )  # fmt: skip
+
+
+def pool_targets(estimates: Mapping[str, ScaleEstimate]) -> ScaleEstimate | None:
+    """One target estimate from several (boards, markers) by inverse-variance weights.
+
+    Estimates without an uncertainty are left out when some have one.
+    """
+    if len(estimates) <= 1:
+        return next(iter(estimates.values()), None)
+    sure = {k: e for k, e in estimates.items() if e.rel_uncertainty}
+    chosen = sure or dict(estimates)
+    weights = {
+        k: 1.0 / e.rel_uncertainty**2 if e.rel_uncertainty else 1.0 for k, e in chosen.items()
+    }
+    total = sum(weights.values())
+    log_s = sum(w * math.log(chosen[k].metres_per_unit) for k, w in weights.items()) / total
+    return ScaleEstimate(
+        'target', math.exp(log_s), 1.0 / math.sqrt(total) if sure else None,
+        sum(e.points for e in chosen.values()), max(e.rms_residual for e in chosen.values()),
+        '; '.join(e.note for e in chosen.values() if e.note),
+        {k: e.rel_uncertainty for k, e in chosen.items()},
+    )  # fmt: skip
+
+
 def _interpolate(
     stamps: npt.NDArray[np.int64], values: F64, at: int, max_gap_ns: int
 ) -> F64 | None:
@@ -291,8 +641,14 @@ def scale_from_odometry(
     odom_positions: F64,
     min_points: int = 4,
     max_gap_ns: int = 200_000_000,
+    calibration: float = 0.02,
 ) -> ScaleEstimate | None:
     """Scale from keyframe centres (model units) aligned to odometry camera positions [m].
+
+    The fit's own spread (bootstrap) only says how well the two paths agree in shape; a scale
+    error of the odometry itself (wheel radius, tyre pressure, slip) stretches the odometry path
+    as a whole and leaves no residual. ``calibration`` is that error's relative standard
+    deviation, added in quadrature.
 
     Args:
         centres: Camera centre in model units per keyframe stamp [ns].
@@ -300,6 +656,7 @@ def scale_from_odometry(
         odom_positions: Nx3 camera positions in the odometry frame at those stamps [m].
         min_points: Fewest matched keyframes for an estimate.
         max_gap_ns: Largest odometry gap interpolated across.
+        calibration: Relative uncertainty of the odometry's own scale.
 
     Returns:
         The estimate, or None when too few keyframes match or the path is too short.
@@ -319,7 +676,11 @@ def scale_from_odometry(
         return None
     sim = umeyama(s, d)
     rms = float(np.sqrt(np.mean(np.sum((sim.apply(s) - d) ** 2, axis=1))))
-    return ScaleEstimate('odometry', sim.scale, bootstrap_scale(s, d), len(s), rms)
+    fit = bootstrap_scale(s, d)
+    rel = math.hypot(fit or 0.0, calibration) if fit is not None or calibration > 0 else None
+    return ScaleEstimate(
+        'odometry', sim.scale, rel, len(s), rms, parts={'fit': fit, 'calibration': calibration}
+    )
 
 
 def off_path(src: F64, dst: F64, floor: float, min_points: int = 4) -> npt.NDArray[np.bool_]:
@@ -372,6 +733,7 @@ def combine(target: ScaleEstimate | None, odometry: ScaleEstimate | None) -> Sca
             ut,
             target.points + odometry.points,
             target.rms_residual,
+            parts={'target': ut, 'odometry': uo},
         )
     wt, wo = 1.0 / ut**2, 1.0 / uo**2
     log_t, log_o = np.log(target.metres_per_unit), np.log(odometry.metres_per_unit)
@@ -391,4 +753,5 @@ def combine(target: ScaleEstimate | None, odometry: ScaleEstimate | None) -> Sca
         target.points + odometry.points,
         max(target.rms_residual, odometry.rms_residual),
         note,
+        {'target': ut, 'odometry': uo},
     )

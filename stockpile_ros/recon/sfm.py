@@ -2,9 +2,11 @@
 
 Intrinsics from CameraInfo, when the keyframes that carry one all carry the same one, are given to
 COLMAP as a fixed camera (PINHOLE, OPENCV, FULL_OPENCV or OPENCV_FISHEYE); otherwise one shared
-SIMPLE_RADIAL camera is self-calibrated. COLMAP puts the centre of the top-left pixel at
-(0.5, 0.5), ROS and OpenCV at (0, 0): principal points are shifted by half a pixel on the way in
-and out.
+SIMPLE_RADIAL camera is self-calibrated. Photos get one SIMPLE_RADIAL camera per image size
+(portrait and landscape shots of one phone), started from their EXIF focal length where they have
+one and refined by bundle adjustment, and are matched as an unordered set. COLMAP puts the centre
+of the top-left pixel at (0.5, 0.5), ROS and OpenCV at (0, 0): principal points are shifted by
+half a pixel on the way in and out.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import numpy.typing as npt
 import pycolmap
+from PIL import Image
 
 from ..camera import CameraModel
 from ..errors import CaptureError
@@ -35,11 +38,17 @@ class SfmOptions:
         max_image_size: Longest side [px] images are downscaled to for feature extraction
             (keypoints are scaled back to full resolution by COLMAP).
         max_features: SIFT features per image.
-        matcher: ``"sequential"`` (video: each keyframe against the next ``overlap`` ones) or
-            ``"exhaustive"`` (every pair; small sets or unordered photos).
+        matcher: ``"sequential"`` (each keyframe against the next ``overlap`` ones),
+            ``"exhaustive"`` (every pair) or ``"auto"``: sequential for a bag or a video; for
+            photos (an unordered set) exhaustive up to ``exhaustive_max`` of them, else
+            vocabulary-tree retrieval when ``vocab_tree`` is given, else sequential in name
+            order (phones number photos as they are taken), with a note in sparse.json.
         overlap: Sequential matching window.
-        vocab_tree: Path of a COLMAP vocabulary tree; when given, sequential matching also
-            detects loops with it.
+        vocab_tree: Path of a COLMAP vocabulary tree (nothing is downloaded); when given,
+            sequential matching also detects loops with it, and large photo sets are matched by
+            retrieval.
+        exhaustive_max: Largest photo set ``"auto"`` matches exhaustively (every pair: the
+            cost grows as the square of the number).
         mapper: ``"incremental"`` or ``"global"`` (GLOMAP).
         num_threads: Threads for feature extraction and the global mapper. Matching and the
             incremental mapper run on one, so that a rerun gives the same model.
@@ -53,9 +62,10 @@ class SfmOptions:
 
     max_image_size: Annotated[int, Range(64, 16384)] = 1024
     max_features: Annotated[int, Range(64, 65536)] = 4096
-    matcher: Literal['sequential', 'exhaustive'] = 'sequential'
+    matcher: Literal['auto', 'sequential', 'exhaustive'] = 'auto'
     overlap: Annotated[int, Range(1, 1000)] = 8
     vocab_tree: str = ''
+    exhaustive_max: Annotated[int, Range(2, 100000)] = 50
     mapper: Literal['incremental', 'global'] = 'incremental'
     num_threads: Annotated[int, Range(-1, 256)] = 2
     min_features: Annotated[int, Range(0, 65536)] = 150
@@ -205,8 +215,68 @@ def _median_triangulation_angle(rec: pycolmap.Reconstruction) -> float:
     return float(np.median(angles)) if angles else 0.0
 
 
+def _import_photos(
+    database: Path,
+    image_dir: Path,
+    names: list[str],
+    reader: pycolmap.ImageReaderOptions,
+    priors: dict[str, float],
+) -> int:
+    """Import photos with one camera per image size, its focal prior the photos' median.
+
+    Returns:
+        The number of photos with a focal prior.
+
+    """
+    groups: dict[tuple[int, int], list[str]] = {}
+    for name in names:
+        with Image.open(image_dir / name) as image:
+            groups.setdefault(image.size, []).append(name)
+    for group in groups.values():
+        pycolmap.import_images(database, image_dir, camera_mode=pycolmap.CameraMode.SINGLE,
+                               image_names=group, options=reader)  # fmt: skip
+    db = pycolmap.Database.open(str(database))
+    try:
+        images = db.read_all_images()
+        for camera in db.read_all_cameras():
+            focal = [priors[i.name] for i in images
+                     if i.camera_id == camera.camera_id and i.name in priors]  # fmt: skip
+            if focal:
+                params = list(camera.params)
+                params[0] = float(np.median(focal))
+                camera.params = params
+                camera.has_prior_focal_length = True
+                db.update_camera(camera)
+    finally:
+        db.close()
+    return sum(1 for n in names if n in priors)
+
+
+def _matcher(options: SfmOptions, count: int, unordered: bool) -> tuple[str, str]:
+    """Return the matcher ``options.matcher`` means for ``count`` keyframes, with a note."""
+    if options.matcher != 'auto':
+        return options.matcher, ''
+    if not unordered:
+        return 'sequential', ''
+    if count <= options.exhaustive_max:
+        return 'exhaustive', ''
+    if options.vocab_tree:
+        return 'vocabtree', ''
+    return 'sequential', (
+        f'{count} photos, more than sfm.exhaustive_max={options.exhaustive_max} for exhaustive '
+        f'matching and no sfm.vocab_tree for retrieval: each photo was matched with the next '
+        f'{options.overlap} in name order, so photos taken out of order may not register'
+    )
+
+
 def run_sfm(
-    image_dir: Path, records: list[KeyframeRecord], out_dir: Path, options: SfmOptions
+    image_dir: Path,
+    records: list[KeyframeRecord],
+    out_dir: Path,
+    options: SfmOptions,
+    *,
+    priors: dict[str, float] | None = None,
+    unordered: bool = False,
 ) -> dict[str, Any]:
     """Reconstruct the keyframes; writes the model and ``sparse.json`` into ``out_dir``.
 
@@ -215,6 +285,9 @@ def run_sfm(
         records: The keyframes, in capture order.
         out_dir: The ``sparse/`` folder (its previous content is replaced).
         options: Tuning.
+        priors: Focal length [px] by keyframe name (from EXIF): the start of a refined camera.
+        unordered: The keyframes are photos, not a sequence: one camera per image size, and
+            ``"auto"`` matching as for photos.
 
     Returns:
         The content of ``sparse.json``.
@@ -240,7 +313,7 @@ def run_sfm(
     database = out_dir / 'database.db'
 
     reader = pycolmap.ImageReaderOptions()
-    camera = _shared_camera(records) if options.use_camera_info else None
+    camera = _shared_camera(records) if options.use_camera_info and not unordered else None
     fixed = camera is not None
     if camera is not None:
         model, params = _colmap_camera(camera)
@@ -255,13 +328,17 @@ def run_sfm(
     # Images enter the database in capture order first: parallel extraction would number them in
     # the order they finish, and the mapper's choices depend on the numbering.
     pycolmap.Database.open(str(database)).close()
-    pycolmap.import_images(
-        database,
-        image_dir,
-        camera_mode=pycolmap.CameraMode.SINGLE,
-        image_names=names,
-        options=reader,
-    )
+    with_prior = 0
+    if unordered:
+        with_prior = _import_photos(database, image_dir, names, reader, priors or {})
+    else:
+        pycolmap.import_images(
+            database,
+            image_dir,
+            camera_mode=pycolmap.CameraMode.SINGLE,
+            image_names=names,
+            options=reader,
+        )
     pycolmap.extract_features(
         database,
         image_dir,
@@ -290,14 +367,25 @@ def run_sfm(
     # COLMAP seeds RANSAC at random by default: with a fixed seed a rerun gives the same model.
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = 0
-    if options.matcher == 'exhaustive':
+    matcher, matcher_note = _matcher(options, len(names), unordered)
+    if matcher == 'exhaustive':
         pycolmap.match_exhaustive(
             database,
             matching_options=matching,
             verification_options=verification,
             device=pycolmap.Device.cpu,
         )
-    elif options.matcher == 'sequential':
+    elif matcher == 'vocabtree':
+        retrieval = pycolmap.VocabTreePairingOptions()
+        retrieval.vocab_tree_path = options.vocab_tree
+        pycolmap.match_vocabtree(
+            database,
+            matching_options=matching,
+            pairing_options=retrieval,
+            verification_options=verification,
+            device=pycolmap.Device.cpu,
+        )
+    elif matcher == 'sequential':
         pairing = pycolmap.SequentialPairingOptions()
         pairing.overlap = options.overlap
         pairing.quadratic_overlap = True
@@ -312,7 +400,7 @@ def run_sfm(
             device=pycolmap.Device.cpu,
         )
     else:
-        raise ValueError(f'unknown matcher {options.matcher!r}')
+        raise ValueError(f'unknown matcher {matcher!r}')
 
     models_dir = out_dir / 'models'
     models_dir.mkdir()
@@ -344,7 +432,8 @@ def run_sfm(
             f'pairs among {len(names)} keyframes): too little overlap, or pure rotation',
             advice_more,
         )
-    best = max(models.values(), key=lambda rec: rec.num_reg_images())
+    ranked = sorted(models.values(), key=lambda rec: -rec.num_reg_images())
+    best = ranked[0]
     registered = int(best.num_reg_images())
     report: dict[str, Any] = {
         'registered': registered,
@@ -354,13 +443,20 @@ def run_sfm(
         'points': int(best.num_points3D()),
         'mean_reprojection_error_px': float(best.compute_mean_reprojection_error()),
         'mean_features': mean_features,
-        'camera': 'fixed from CameraInfo' if fixed else 'self-calibrated SIMPLE_RADIAL',
-        'matcher': options.matcher,
+        'camera': _camera_text(fixed, with_prior, len(names)),
+        'cameras': [_camera_report(cam) for cam in best.cameras.values()],
+        'matcher': matcher,
+        'matcher_note': matcher_note,
         'mapper': options.mapper,
         'unregistered': sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
-        # Every model's images, for the registration gate (which photos or stretch went where).
+        # Every model, the largest (the one kept) first: which keyframes landed where (also what
+        # the registration gate reads).
         'model_images': [
-            sorted(rec.image(i).name for i in rec.reg_image_ids()) for rec in models.values()
+            {
+                'registered': int(rec.num_reg_images()),
+                'images': sorted(rec.image(i).name for i in rec.reg_image_ids()),
+            }
+            for rec in ranked
         ],
     }
     report['median_triangulation_angle_deg'] = _median_triangulation_angle(best)
@@ -375,6 +471,24 @@ def run_sfm(
             advice_more,
         )
     return report
+
+
+def _camera_text(fixed: bool, with_prior: int, total: int) -> str:
+    if fixed:
+        return 'fixed from CameraInfo'
+    if with_prior:
+        return f'SIMPLE_RADIAL from the EXIF focal length of {with_prior}/{total} photos, refined'
+    return 'self-calibrated SIMPLE_RADIAL'
+
+
+def _camera_report(camera: pycolmap.Camera) -> dict[str, Any]:
+    return {
+        'width': int(camera.width),
+        'height': int(camera.height),
+        'model': str(camera.model_name),
+        'params': [float(v) for v in camera.params],
+        'prior_focal_length': bool(camera.has_prior_focal_length),
+    }
 
 
 def load_sparse(sparse_dir: Path) -> SparseModel:

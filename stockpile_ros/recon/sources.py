@@ -11,14 +11,17 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import numpy.typing as npt
+from PIL import ImageOps
 
 from ..bagio.images import DEFAULT_MAX_PIXELS, ImageError, check_pixels, image_size
 from ..camera import Frame
 from ..errors import StockpileError
+from .exif import HEIF_SUFFIXES, open_photo
 
-__all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'iter_frames', 'source_kind']
+__all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'iter_frames', 'photo_files', 'source_kind']
 
-IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff')
+IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', *HEIF_SUFFIXES)
 VIDEO_SUFFIXES = ('.mp4', '.mov', '.avi', '.mkv', '.webm', '.m4v')
 
 
@@ -48,9 +51,27 @@ def source_kind(source: Path) -> str:
     )
 
 
+def photo_files(folder: Path) -> list[Path]:
+    """Return the photos of a folder, sorted by name (a frame's ``index`` is its position here)."""
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def _heif(path: Path, max_pixels: int) -> npt.NDArray[np.uint8]:
+    """Decode a HEIC/HEIF photo to RGB (its rotation applied), its size checked first."""
+    with open_photo(path) as image:
+        try:
+            check_pixels(image.width, image.height, max_pixels, path.name)
+        except ImageError as exc:
+            raise StockpileError(f'{path}: {exc}') from None
+        return np.asarray(ImageOps.exif_transpose(image).convert('RGB'), dtype=np.uint8)
+
+
 def _photos(folder: Path, max_pixels: int) -> Iterator[Frame]:
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-    for index, path in enumerate(files):
+    for index, path in enumerate(photo_files(folder)):
+        if path.suffix.lower() in HEIF_SUFFIXES:
+            rgb = _heif(path, max_pixels)
+            yield Frame(index * 1_000_000_000, rgb, path.name, None, str(folder), index)
+            continue
         data = path.read_bytes()
         try:
             _, width, height = image_size(data)

@@ -1,0 +1,156 @@
+"""Photos and video to the result folder: EXIF priors, unordered matching, marker scale."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+from recon_synth import look_at, marker_decal, render, scene_mesh
+
+from stockpile_ros.camera import CameraModel
+from stockpile_ros.cli import main
+from stockpile_ros.geometry import umeyama
+from stockpile_ros.recon.exif import read_intrinsics, sensor_width
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.recon.pipeline import (
+    WorkFolder,
+    estimate_scale,
+    photo_names,
+    run_keyframes,
+    run_sfm_stage,
+)
+from stockpile_ros.recon.scale import ScaleEstimate
+from stockpile_ros.recon.sfm import load_sparse
+from stockpile_ros.settings import build_settings
+
+W, H = 640, 480
+CAM = CameraModel.from_fov(W, H, 60.0)
+MARKER = 'aruco:DICT_4X4_50:7:0.25'
+
+
+def _centre(t: float) -> np.ndarray:
+    """A walk round the pile at two heights: t in [0, 1] along the arc."""
+    angle = -0.7 + 1.4 * t
+    height = 1.45 + 0.25 * math.sin(6 * math.pi * t)
+    return np.array([2.4 * math.cos(angle), 2.4 * math.sin(angle), height])
+
+
+def _view(t: float) -> np.ndarray:
+    mesh = _view.mesh  # type: ignore[attr-defined]
+    rot, trans = look_at(_centre(t), np.array([0.3, 0.0, 0.0]))
+    decal = marker_decal('DICT_4X4_50', 7, 0.25, (1.15, 0.0))
+    return render(mesh, CAM.k, (W, H), rot, trans, decals=(decal,))
+
+
+_view.mesh = scene_mesh()  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope='module')
+def photos(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np.ndarray]]:
+    """16 JPEGs with a phone-like EXIF (35 mm equivalent rounded to a whole mm), names shuffled."""
+    folder = tmp_path_factory.mktemp('photos')
+    order = np.random.default_rng(0).permutation(16)
+    truth = {}
+    for i in range(16):
+        exif = Image.Exif()
+        exif[0x010F], exif[0x0110] = 'Synth', 'Phone'
+        sub = exif.get_ifd(0x8769)
+        sub[0x920A] = 4.2
+        sub[0xA405] = round(CAM.fx * math.hypot(36, 24) / math.hypot(W, H))
+        name = f'IMG_{order[i]:04d}.jpg'
+        Image.fromarray(_view(i / 15)).save(folder / name, quality=92, exif=exif)
+        truth[name] = _centre(i / 15)
+    return folder, truth
+
+
+def _scale_error(
+    work: WorkFolder, truth: dict[str, np.ndarray], names: dict[str, str]
+) -> tuple[int, ScaleEstimate, float]:
+    """Registered count, the estimate and its error against the true camera centres.
+
+    The truth only judges the estimate: the estimate itself sees the marker's size alone.
+    """
+    settings = build_settings({'recon.target': MARKER})
+    model = load_sparse(work.sparse)
+    scale, _ = estimate_scale(work, model, settings.recon)
+    src = np.array([model.views[k].center for k in names if k in model.views])
+    dst = np.array([truth[names[k]] for k in names if k in model.views])
+    true_scale = umeyama(src, dst).scale
+    return len(src), scale, scale.metres_per_unit / true_scale - 1
+
+
+def test_exif_focal_and_sensor_table(photos: tuple[Path, dict[str, np.ndarray]]) -> None:
+    folder, _ = photos
+    info = read_intrinsics(next(folder.glob('*.jpg')))
+    assert info.focal_source == '35mm equivalent' and info.focal_35mm == 30
+    # Whole-millimetre rounding of the 35 mm equivalent: the prior is within 2 % of the truth.
+    assert info.focal_px == pytest.approx(CAM.fx, rel=0.02)
+    assert sensor_width('NIKON CORPORATION', 'NIKON D40') == 23.5
+    assert sensor_width('NIKON CORPORATION', 'NIKON D850') == 35.9
+    assert sensor_width('Canon', 'Canon EOS 5D Mark IV') == 36.0
+    assert sensor_width('Apple', 'iPhone 15') is None
+
+
+def test_unordered_photos_register_and_scale_from_one_marker(
+    photos: tuple[Path, dict[str, np.ndarray]], tmp_path: Path
+) -> None:
+    folder, truth = photos
+    work = WorkFolder(tmp_path)
+    options = build_settings({'recon.target': MARKER}).recon
+    assert run_keyframes(folder, work, options)['keyframes'] == 16
+    report = run_sfm_stage(work, options)
+    assert report['matcher'] == 'exhaustive' and 'EXIF focal length of 16/16' in report['camera']
+    assert report['registered'] == 16 and report['model_images'][0]['registered'] == 16
+    assert sorted(report['model_images'][0]['photos']) == sorted(truth)
+    registered, scale, error = _scale_error(work, truth, photo_names(work))
+    assert registered == 16
+    assert abs(error) <= 0.005, error
+    assert scale.rel_uncertainty is not None and scale.parts['printed_size'] == 0.003
+    assert scale.parts['detections'] is not None and 0 < scale.parts['detections'] < 0.005
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason='measured 0.85 % scale error (17 of 40 frames kept, self-calibrated, 495 points): '
+    'above the 0.5 % asked; the stated 0.3 % does not cover it either',
+)
+def test_video_of_the_same_scene_scales_the_same(tmp_path: Path) -> None:
+    video = tmp_path / 'walk.avi'
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), 10.0, (W, H))
+    frames = 40
+    for i in range(frames):
+        writer.write(cv2.cvtColor(_view(i / (frames - 1)), cv2.COLOR_RGB2BGR))
+    writer.release()
+    work = WorkFolder(tmp_path / 'work')
+    # 40 frames for the whole walk where a phone films hundreds: the selector is told to keep
+    # frames as close as a 30 fps walk would offer them.
+    values = {'recon.target': MARKER, 'selector.min_parallax': 0.03, 'selector.min_spacing': 1}
+    options = build_settings(values).recon
+    kept = run_keyframes(video, work, options)['keyframes']
+    assert 12 <= kept < frames
+    report = run_sfm_stage(work, options)
+    assert report['matcher'] == 'sequential' and report['registered'] == kept
+    truth = {r.file: _centre(r.index / (frames - 1)) for r in KeyframeStore(work.keyframes).records}
+    _, _, error = _scale_error(work, truth, {k: k for k in truth})
+    assert abs(error) <= 0.005, error
+
+
+def test_replay_of_photos_without_a_target_says_model_units(
+    photos: tuple[Path, dict[str, np.ndarray]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder, _ = photos
+    out = tmp_path / 'out'
+    status = main(['replay', str(folder), '--out', str(out), '--set', 'dense.work_width=320'])
+    printed = capsys.readouterr().out
+    assert status == 0, printed
+    assert (out / 'result' / 'report.json').exists() and not list(out.glob('*.mcap'))
+    assert 'output bag: none' in printed and 'registered 16/16' in printed
+    assert 'model units (not metres)' in printed and 'no target was given' in printed
+    assert ' m\n' not in printed and ' m,' not in printed
+    mesh = json.loads((out / 'work' / 'mesh' / 'mesh.json').read_text())
+    assert mesh['units'] == 'model' and mesh['scale']['method'] == 'none'
