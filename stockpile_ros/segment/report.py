@@ -410,16 +410,31 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
                 f'rocks seen on under {context["partly_pct"]} of their surface.'
             ],
         )
-        ax = fig.add_axes((0.06, 0.5, 0.88, 0.42))
+        ax = fig.add_axes((0.06, 0.56, 0.88, 0.36))
         ax.imshow(imread(io.BytesIO(images['render']), format='png'))
         ax.set_axis_off()
         if 'keyframe' in images:
-            ax = fig.add_axes((0.06, 0.06, 0.88, 0.4))
+            ax = fig.add_axes((0.06, 0.15, 0.88, 0.36))
             ax.imshow(imread(io.BytesIO(images['keyframe']), format='png'))
             ax.set_axis_off()
-            fig.text(0.06, 0.47, context['keyframe_note'], fontsize=8.5)
+            fig.text(0.06, 0.53, context['keyframe_note'], fontsize=8.5)
         else:
-            fig.text(0.06, 0.45, f'No keyframe photo: {context["keyframe_note"]}.', fontsize=9)
+            fig.text(0.06, 0.53, f'No keyframe photo: {context["keyframe_note"]}.', fontsize=9)
+        sieves = context['sieves']
+        if sieves:
+            _text_block(
+                fig, 0.135, [f'Percent passing at standard sizes. {context["sieve_note"]}'], 7.5
+            )
+            _table(
+                fig,
+                0.11,
+                [f'size [{context["lu"]}]', *(s['size'] for s in sieves)],
+                [
+                    ['by mass %', *(s['mass'] for s in sieves)],
+                    ['by count %', *(s['count'] for s in sieves)],
+                ],
+                0.06,
+            )
         pdf.savefig(fig)
         per_page = 48
         rocks = context['rock_rows']
@@ -430,19 +445,6 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
             chunk = [r['cells'] for r in rocks[start : start + per_page]]
             if chunk:
                 _table(fig, y, context['rock_head'], chunk, 0.0165 * (len(chunk) + 1))
-            if start == 0 and context['sieves']:
-                sv = context['sieves']
-                yy = 0.12
-                _table(
-                    fig,
-                    yy + 0.06,
-                    [f'size [{context["lu"]}]', *(s['size'] for s in sv)],
-                    [
-                        ['by mass %', *(s['mass'] for s in sv)],
-                        ['by count %', *(s['count'] for s in sv)],
-                    ],
-                    0.06,
-                )
             pdf.savefig(fig)
 
 
