@@ -369,9 +369,11 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
             ['by mass', *(d['name'] for d in ds)],
             [
                 [f'value [{context["lu"]}]', *(d['value'] for d in ds)],
-                [f'{context["conf_pct"]} interval', *(d['interval'] for d in ds)],
+                # The interval's ends on two rows: one cell each is too narrow for both.
+                [f'{context["conf_pct"]} low', *(d['interval'].split(' - ')[0] for d in ds)],
+                [f'{context["conf_pct"]} high', *(d['interval'].split(' - ')[-1] for d in ds)],
             ],
-            0.06,
+            0.075,
         )
         rr = context['rr']
         if rr:
