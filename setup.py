@@ -10,6 +10,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['tests', 'tests.*']),
+    # The report page's template is read with jinja2's PackageLoader.
+    package_data={'stockpile_ros.segment': ['templates/*.j2']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
@@ -36,6 +38,7 @@ setup(
         'tqdm>=4.60',
         'matplotlib>=3.7',
         'PyYAML>=6',
+        'jinja2>=3.1',
     ],
     extras_require={
         # mcap: an independent reader to check the MCAP files we write (chunks, channel metadata).

@@ -18,8 +18,10 @@ from .meshcheck import read_mesh
 from .recon.keyframes import KeyframeStore
 from .recon.pipeline import WorkFolder, reconstruct
 from .segment.pipeline import Analysis, analyse_mesh
+from .segment.provenance import Provenance
+from .segment.qa import report_options
 from .segment.report import write_result_folder
-from .settings import Settings, class_spec
+from .settings import Settings, class_spec, defaults
 
 __all__ = ['MIN_KEYFRAMES', 'RECON_STAGES', 'Outcome', 'run_reconstruction', 'run_segmentation']
 
@@ -112,14 +114,20 @@ def run_reconstruction(
 
 
 def run_segmentation(
-    settings: Settings, mesh_dir: Path, result_dir: str | Path | None = None
+    settings: Settings,
+    mesh_dir: Path,
+    result_dir: str | Path | None = None,
+    provenance: Provenance | None = None,
 ) -> Outcome:
     """Segment a mesh folder's surface, measure the rocks and write the result folder.
 
     Args:
         settings: Parameters, class to check and work folder.
-        mesh_dir: Folder holding ``mesh.ply`` and ``mesh.json``.
+        mesh_dir: Folder holding ``mesh.ply`` and ``mesh.json``; the keyframe photo of the page
+            comes from the ``keyframes/`` folder beside it.
         result_dir: Result folder (``<work_dir>/result`` by default).
+        provenance: What the run was made from; None: the mesh file itself is the input
+            (the parameters, site, pile and operator from ``settings``).
 
     Returns:
         The outcome, ``analysis`` set and ``results['segment']`` the report dict when ok.
@@ -132,16 +140,21 @@ def run_segmentation(
         mesh, check = read_mesh(mesh_dir / 'mesh.ply')
         info = json.loads((mesh_dir / 'mesh.json').read_text())
         spec = class_spec(settings)
+        options = report_options(settings.values)
         analysis = analyse_mesh(
             mesh.vertices, mesh.faces, mesh.colors,
             seg_params=settings.segment, measure_params=settings.measure,
             spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
+            report_options=options,
         )  # fmt: skip
         analysis.report['mesh']['check'] = check.as_dict()
         if info['scale']['method'] != 'none':
             # In model units (no scale) a size in metres says nothing.
             analysis.report['warnings'][:0] = check.warnings
-        write_result_folder(out, analysis, spec)
+        made = provenance or Provenance.for_input(
+            mesh_dir / 'mesh.ply', settings.values, defaults()
+        )
+        write_result_folder(out, analysis, made, options, mesh_dir.parent / 'keyframes')
     except (json.JSONDecodeError, KeyError) as exc:
         return _failure('segment', StockpileError(f'{mesh_dir}: unreadable mesh: {exc}'), outcome)
     except _FAILURES as exc:

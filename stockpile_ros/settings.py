@@ -38,6 +38,7 @@ from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions
 from .segment.gradation import load_class_table
 from .segment.measure import MeasureParams
+from .segment.qa import ReportOptions
 from .segment.segmentation import SegmentParams
 
 __all__ = [
@@ -252,6 +253,7 @@ def _table() -> tuple[Setting, ...]:
              for r in _from_dataclass('recon', ReconOptions, rc)]  # fmt: skip
     rows += _from_dataclass('segment', SegmentParams, sg)
     rows += _from_dataclass('measure', MeasureParams, sg)
+    rows += _from_dataclass('report', ReportOptions, sg)
     return tuple(rows)
 
 

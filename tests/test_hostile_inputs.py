@@ -301,8 +301,8 @@ def _segment(
 
 
 def _rocks(report: dict[str, Any]) -> list[float]:
-    """Each rock's intermediate dimension and mass, in report order."""
-    return [value for r in report['rocks'] for value in (r['b'], r['mass'])]
+    """Each rock's intermediate dimension and volume, in report order (mass is null unscaled)."""
+    return [value for r in report['rocks'] for value in (r['b'], r['volume'])]
 
 
 def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_result(
@@ -356,7 +356,10 @@ def test_a_mesh_in_other_units_is_refused_unless_its_units_are_given(
     assert code == 2 and 'implausible size' in err
     for word in words:
         assert word in err
-    _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
+    # Units given make a metric result (masses in kg); the clean mesh is in metres.
+    _, _, clean = _segment(
+        capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c', '--units', 'm'
+    )
     _, _, scaled = _segment(capsys, mesh, tmp_path / 's', '--units', units)
     assert _rocks(scaled) == pytest.approx(_rocks(clean), rel=1e-4)
     assert scaled['mesh']['check']['units'] == units

@@ -1,10 +1,12 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
 from stockpile_ros import messages as m
@@ -16,10 +18,10 @@ from stockpile_ros.publish import capture_warnings
 from stockpile_ros.segment.measure import RockMeasure, visibility_warnings
 
 ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',
-             'visible_fraction', 'fer', 'sphericity', 'confidence'}  # fmt: skip
+             'visible_fraction', 'fer', 'sphericity', 'confidence', 'orientation_xyzw'}  # fmt: skip
 GRAD_KEYS = {'size_measure', 'sizes', 'percent_passing_count', 'percent_passing_mass', 'd10',
              'd15', 'd30', 'd50', 'd60', 'd85', 'd100', 'cu', 'cc', 'rock_count', 'total_mass',
-             'spec'}  # fmt: skip
+             'spec', 'intervals', 'rosin_rammler', 'sieves'}  # fmt: skip
 
 
 def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
@@ -40,7 +42,7 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     assert status == 0
     assert 'rocks' in capsys.readouterr().out
     report = json.loads((out / 'report.json').read_text(), parse_constant=lambda c: 1 / 0)
-    assert report['schema'] == 'stockpile-report/1'
+    assert report['schema'] == 'stockpile-report/2'
     assert report['units'] == 'm' and report['frame_id'] == 'stockpile'
     assert report['scale'] == info['scale'] and report['keyframes'] == info['keyframes']
     assert len(report['rocks']) >= 3
@@ -50,7 +52,20 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
         assert 0 <= rock['confidence'] <= 1 and 0 < rock['visible_fraction'] <= 1
     assert set(report['gradation']) == GRAD_KEYS
     spec = report['gradation']['spec']
-    assert spec['class'] == 'I' and spec['checked'] and isinstance(spec['passed'], bool)
+    assert spec['class'] == 'I' and spec['checked']
+    assert spec['verdict'] in ('PASS', 'FAIL', 'UNDECIDED')
+    assert spec['passed'] == {'PASS': True, 'FAIL': False}.get(spec['verdict'])
+    assert [row['key'] for row in spec['limits']] == ['d15', 'd50', 'd85', 'd100']
+    assert 'NCHRP Report 568' in spec['standard'] and 'check the limits' in spec['caveat']
+    for key in ('d15', 'd50', 'd85'):
+        lo, hi = report['gradation']['intervals']['mass'][key]
+        value = report['gradation'][key]
+        assert value is None or lo is None or lo <= value <= hi
+    prov = report['provenance']
+    assert prov['input_path'] == str(mesh_path) and len(prov['input_sha256']) == 64
+    assert prov['parameters_changed'] == {'gradation.spec_class': 'I'}
+    assert prov['keyframes_used'] == 1 and prov['scale']['method'] == 'target'
+    assert prov['created'].endswith('+00:00') and prov['tool_version']
     assert report['segmentation']['mode'] == 'default'
     # The class checked sets the smallest rock of interest: half class I's smallest D15.
     scale = report['segmentation']['scale']
@@ -65,8 +80,56 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     assert len(rows) == len(report['rocks']) + 1
     html = (out / 'index.html').read_text()
     assert 'data:image/png;base64,' in html and 'Stockpile report' in html
+    assert 'src="http' not in html and 'src="file' not in html
+    assert spec['caveat'][:40] in html and 'No keyframe photo' in html
+    assert 'D50 by mass' in html and '[mm]' in html
     for name in ('gradation.png', 'render.png'):
         assert (out / name).read_bytes()[:4] == b'\x89PNG'
+    assert (out / 'report.pdf').read_bytes()[:5] == b'%PDF-'
+    assert rows[1].endswith(',m')
+
+
+def test_orientation_is_the_measured_axes() -> None:
+    from stockpile_ros.segment.pipeline import analyse_mesh
+
+    v, f, _ = small_pile()
+    analysis = analyse_mesh(v, f)
+    labels = analysis.segmentation.labels
+    for rock in analysis.report['rocks']:
+        rot = Rotation.from_quat(rock['orientation_xyzw']).as_matrix()
+        pts = v[np.unique(f[labels == rock['id']])] - rock['centroid']
+        extent = np.ptp(pts @ rot, axis=0)
+        # x along a, z along c: the visible surface is longest along x and shortest along z.
+        assert extent[0] >= extent[1] >= extent[2] * 0.999
+        assert np.linalg.det(rot) == pytest.approx(1.0)
+
+
+def test_a_run_without_scale_shows_no_metres_and_no_verdict(tmp_path, capsys) -> None:
+    v, f, _ = small_pile()
+    mesh_path = tmp_path / 'mesh.ply'
+    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    out = tmp_path / 'unscaled'
+    assert main(['segment', str(mesh_path), '--out', str(out), '--spec-class', 'I']) == 0
+    printed = capsys.readouterr().out
+    assert 'model units' in printed and 'kg' not in printed and 'REFUSED' in printed
+    report = json.loads((out / 'report.json').read_text())
+    assert report['units'] == 'model' and report['scale']['method'] == 'none'
+    spec = report['gradation']['spec']
+    assert spec['verdict'] == 'REFUSED' and spec['checked'] is False and spec['passed'] is None
+    assert 'model units' in spec['reasons'][0]
+    assert all(rock['mass'] is None for rock in report['rocks'])
+    assert report['gradation']['total_mass'] is None and report['gradation']['sieves'] == []
+    # Without scale the class does not set the smallest rock of interest either.
+    assert report['segmentation']['scale']['source'] == 'mesh'
+    rows = (out / 'rocks.csv').read_text().strip().splitlines()
+    header = rows[0].split(',')
+    first = dict(zip(header, rows[1].split(','), strict=True))
+    assert first['units'] == 'model' and first['mass'] == ''
+    html = (out / 'index.html').read_text()
+    text = re.sub(r'<style.*?</style>|<[^>]+>', ' ', html, flags=re.S)
+    assert 'model units' in text and 'REFUSED' in text
+    for unit in (r'\bkg\b', r'\blb\b', r'\bmm\b', r'\[m\]', r'\d m\b', r'\bm per\b', r'\bm³'):
+        assert not re.search(unit, text), unit
 
 
 def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
@@ -100,3 +163,35 @@ def test_partly_seen_rocks_raise_a_capture_warning() -> None:
     ((topic, msg),) = capture_warnings(m.RosbagsFactory(typestore()), 0, {'warnings': [text]})
     assert topic == topics.DIAGNOSTICS
     assert msg.status[0].name == 'stockpile/capture' and msg.status[0].message == text
+
+
+def test_a_keyframe_photo_gets_the_rocks_outlined(tmp_path) -> None:
+    import cv2
+
+    from stockpile_ros.segment.pipeline import analyse_mesh
+    from stockpile_ros.segment.provenance import Provenance
+    from stockpile_ros.segment.render import overview_camera
+    from stockpile_ros.segment.report import write_result_folder
+
+    v, f, _ = small_pile()
+    cam = overview_camera(v, width=320, height=240, azimuth_deg=30.0)
+    keyframes = tmp_path / 'work' / 'keyframes'
+    keyframes.mkdir(parents=True)
+    cv2.imwrite(str(keyframes / 'kf_1.png'), np.full((240, 320, 3), 40, dtype=np.uint8))
+    entry = {'file': 'kf_1.png', 'stamp_ns': 7, 'camera': {'width': 320, 'height': 240,
+             'k': cam.k.ravel().tolist(), 'd': [], 'distortion_model': 'plumb_bob'}}  # fmt: skip
+    (keyframes / 'keyframes.jsonl').write_text(json.dumps(entry) + '\n')
+    pose = {'stamp_ns': 7, 'position': cam.position.tolist(),
+            'orientation_xyzw': Rotation.from_matrix(cam.rotation).as_quat().tolist()}  # fmt: skip
+    info = {'scale': {'method': 'target', 'metres_per_unit': 1.0, 'rel_uncertainty': 0.01},
+            'keyframes': [pose]}  # fmt: skip
+    analysis = analyse_mesh(v, f, mesh_info=info)
+    out = tmp_path / 'result'
+    paths = write_result_folder(out, analysis, Provenance(input_path='x'), None, keyframes)
+    photo = cv2.imread(str(paths['keyframe.png']))
+    assert photo is not None
+    # Outlines (white for well-seen rocks, orange for partly seen ones) are drawn on the photo.
+    bright = (photo.max(axis=2) > 200).sum()
+    assert bright > 100
+    html = (out / 'index.html').read_text()
+    assert 'Keyframe kf_1.png' in html and 'No keyframe photo' not in html

@@ -11,8 +11,10 @@ from typing import Any
 from ..errors import StockpileError
 from ..meshcheck import UNITS, read_mesh
 from ..segment.pipeline import analyse_mesh
+from ..segment.provenance import Provenance
+from ..segment.qa import report_options
 from ..segment.report import write_result_folder
-from ..settings import class_spec, write_effective
+from ..settings import class_spec, defaults, write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
@@ -21,7 +23,10 @@ DESCRIPTION = """Segment a stockpile mesh (metric, z up, ground at z = 0) into r
 curvature search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass,
 sphericity...) and the pile's gradation, optionally check it against a riprap class, and write the
 result folder:
-report.json, segments.ply, rocks.csv, gradation.png, render.png, index.html.
+report.json, segments.ply, rocks.csv, gradation.png, render.png, keyframe.png (a keyframe photo
+with the rocks outlined, when the keyframes/ folder of the work folder is beside the mesh's
+folder), index.html and report.pdf. The verdict against a class is PASS, FAIL or UNDECIDED (a
+confidence interval straddles a limit); without a metric scale no class is checked.
 
 Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" keeps the
 ground and the valleys at the scale of the smallest rock of interest out of the search, uses
@@ -61,7 +66,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         '--units',
         choices=list(UNITS),
         help='length unit of the mesh coordinates, scaled to metres (default: metres; a mesh '
-        'whose size is implausible in metres is refused unless its units are given)',
+        'whose size is implausible in metres is refused unless its units are given). Without '
+        '--mesh-info the result is in model units (no metres, no class verdict) unless the '
+        'units are given here (scale method "given")',
     )
     add_parameter_arguments(parser, _ALIASES)
 
@@ -88,24 +95,34 @@ def run(args: argparse.Namespace) -> int:
             f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
         )
     info = _read_info(args.mesh_info)
+    if info is None and args.units is not None:
+        # The user vouches for the mesh's units: metric, though no target or odometry says so.
+        info = {'scale': {'method': 'given', 'metres_per_unit': UNITS[args.units],
+                          'rel_uncertainty': None}}  # fmt: skip
     spec = class_spec(settings)
+    options = report_options(settings.values)
     analysis = analyse_mesh(
         mesh.vertices, mesh.faces, mesh.colors,
         seg_params=settings.segment, measure_params=settings.measure,
-        spec=spec, mesh_info=info, source=str(args.mesh),
+        spec=spec, mesh_info=info, source=str(args.mesh), report_options=options,
     )  # fmt: skip
     analysis.report['mesh']['check'] = check.as_dict()
     analysis.report['warnings'][:0] = check.warnings
-    write_result_folder(args.out, analysis, spec)
+    provenance = Provenance.for_input(args.mesh, settings.values, defaults())
+    keyframes = args.mesh.resolve().parent.parent / 'keyframes'
+    write_result_folder(args.out, analysis, provenance, options, keyframes)
     write_effective(settings, args.out)
     g = analysis.report['gradation']
-    d50 = 'undefined' if g['d50'] is None else f'{g["d50"]:.3f} m'
-    print(
-        f'{len(analysis.rocks)} rocks, D50 {d50}, total mass {g["total_mass"]:.1f} kg -> {args.out}'
-    )
-    if g['spec']['checked']:
-        verdict = 'PASS' if g['spec']['passed'] else 'FAIL: ' + '; '.join(g['spec']['reasons'])
-        print(f'class {g["spec"]["class"]}: {verdict}')
+    metric = analysis.report['units'] != 'model'
+    unit = 'm' if metric else 'model units'
+    d50 = 'undefined' if g['d50'] is None else f'{g["d50"]:.3f} {unit}'
+    mass = f', total mass {g["total_mass"]:.1f} kg' if metric else ''
+    print(f'{len(analysis.rocks)} rocks, D50 {d50}{mass} -> {args.out}')
+    if g['spec']['class'] is not None:
+        reasons = '; '.join(g['spec']['reasons'])
+        print(
+            f'class {g["spec"]["class"]}: {g["spec"]["verdict"]}{": " if reasons else ""}{reasons}'
+        )
     for text in analysis.report['warnings']:
         print(f'stockpile segment: warning: {text}', file=sys.stderr)
     return 0

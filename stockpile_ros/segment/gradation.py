@@ -115,6 +115,8 @@ def gradation(
 def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
     """Read the riprap class table (``config/riprap_classes.yaml`` by default), sizes in metres.
 
+    Each class entry carries the table's ``standard``, ``edition`` and ``caveat`` ('' if absent).
+
     Raises:
         StockpileError: The file is missing or malformed.
 
@@ -132,6 +134,8 @@ def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
     basis = str(data.get('basis', 'mass'))
     if basis not in ('mass', 'count'):
         raise StockpileError(f'{file}: basis must be mass or count')
+    # Every verdict is printed with the standard it was checked against and the table's caveat.
+    edition = {key: str(data.get(key, '')) for key in ('standard', 'edition', 'caveat')}
     classes: dict[str, Any] = {}
     for name, entry in data['classes'].items():
         limits: dict[str, list[float | None]] = {}
@@ -148,9 +152,11 @@ def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
             'basis': basis,
             'limits': limits,
             'note': entry.get('note', ''),
+            **edition,
         }
     return {
         'source': data.get('source', ''),
+        **edition,
         'basis': basis,
         'size_measure': data.get('size_measure', 'b'),
         'classes': classes,

@@ -9,14 +9,17 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial.transform import Rotation
 
 from .gradation import gradation
-from .measure import MeasureParams, RockMeasure, measure_rocks, visibility_warnings
+from .measure import MeasureParams, RockMeasure, measure_rocks, solid_axes, visibility_warnings
+from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, SegmentParams, segment_mesh
 
-__all__ = ['Analysis', 'analyse_mesh', 'json_safe']
+__all__ = ['REPORT_SCHEMA', 'Analysis', 'analyse_mesh', 'json_safe', 'principal_axes']
 
-REPORT_SCHEMA = 'stockpile-report/1'
+REPORT_SCHEMA = 'stockpile-report/2'
 
 
 @dataclass(frozen=True)
@@ -29,7 +32,7 @@ class Analysis:
         colors: Nx3 uint8 vertex colours, or None.
         segmentation: Labels and what they came from.
         rocks: Measured rocks (ids as in ``segmentation.labels``).
-        report: The report.json dict (docs/formats.md, schema ``stockpile-report/1``).
+        report: The report.json dict (docs/formats.md, schema ``stockpile-report/2``).
 
     """
 
@@ -67,6 +70,30 @@ def _reconstruction_warnings(info: dict[str, Any]) -> list[str]:
     return out
 
 
+def principal_axes(
+    vertices: npt.NDArray[np.float64], seg: Segmentation, rock_ids: list[int]
+) -> dict[int, list[float]]:
+    """Orientation of each rock's principal axes as a quaternion ``[x, y, z, w]``.
+
+    The axes are those the measurement takes a, b, c along (:func:`~.measure.solid_axes` of the
+    convex hull of the rock's visible surface): the rotation takes x to the a axis, y to b and z
+    to c (right-handed, c flipped where needed).
+    """
+    out: dict[int, list[float]] = {}
+    order = np.argsort(seg.labels, kind='stable')
+    bounds = np.searchsorted(seg.labels[order], np.arange(int(seg.labels.max(initial=0)) + 2))
+    for rock in rock_ids:
+        tri = seg.faces[order[bounds[rock] : bounds[rock + 1]]]
+        try:
+            _, axes, _ = solid_axes(ConvexHull(vertices[np.unique(tri)]))
+        except (QhullError, ValueError):
+            continue
+        if np.linalg.det(axes) < 0:
+            axes = axes * np.array([1.0, 1.0, -1.0])
+        out[rock] = [float(q) for q in Rotation.from_matrix(axes).as_quat()]
+    return out
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -77,6 +104,7 @@ def analyse_mesh(
     spec: dict[str, Any] | None = None,
     mesh_info: dict[str, Any] | None = None,
     source: str = '',
+    report_options: ReportOptions | None = None,
 ) -> Analysis:
     """Segment a stockpile mesh, measure its rocks and grade the pile.
 
@@ -89,6 +117,7 @@ def analyse_mesh(
         spec: A class of the class table to check the gradation against, or None.
         mesh_info: The mesh.json dict of the reconstruction (scale, keyframes, frame), or None.
         source: Where the mesh came from, recorded in the report.
+        report_options: Intervals (resamples, confidence, seed) and the Rosin-Rammler fit.
 
     Returns:
         The analysis, report included.
@@ -98,20 +127,39 @@ def analyse_mesh(
     f = np.asarray(faces, dtype=np.int64)
     sp = seg_params or SegmentParams()
     mp = measure_params or MeasureParams()
-    t0 = time.perf_counter()
-    seg = segment_mesh(v, f, sp, spec)
-    t1 = time.perf_counter()
-    rocks = measure_rocks(v, seg, mp)
-    grad = gradation([r.b for r in rocks], [r.mass for r in rocks], 'b', spec)
+    opts = report_options or ReportOptions()
     info = mesh_info or {}
     scale = info.get('scale') or {'method': 'none', 'metres_per_unit': 1.0, 'rel_uncertainty': None}
+    metric = scale.get('method') != 'none'
+    t0 = time.perf_counter()
+    # A class's sizes are metres: in model units they would set a meaningless smallest rock.
+    seg = segment_mesh(v, f, sp, spec if metric else None)
+    t1 = time.perf_counter()
+    rocks = measure_rocks(v, seg, mp)
+    sizes, masses = [r.b for r in rocks], [r.mass for r in rocks]
+    grad = gradation(sizes, masses, 'b', spec if metric else None)
+    intervals = bootstrap_intervals(sizes, masses, scale.get('rel_uncertainty'), opts)
+    grad['intervals'] = intervals
+    grad['spec'] = decide(grad, spec, intervals) if metric else refuse(spec)
+    grad['rosin_rammler'] = rosin_rammler(grad) if opts.rosin_rammler else None
+    grad['sieves'] = sieve_table(grad, opts.length_unit) if metric else []
+    orientation = principal_axes(v, seg, [r.id for r in rocks])
+    rock_dicts = []
+    for r in rocks:
+        entry = {**r.as_dict(), 'orientation_xyzw': orientation.get(r.id, [0.0, 0.0, 0.0, 1.0])}
+        if not metric:
+            # Without scale a mass would be model units cubed times a density: no kilograms.
+            entry['mass'] = None
+        rock_dicts.append(entry)
+    if not metric:
+        grad['total_mass'] = None
     report: dict[str, Any] = {
         'schema': REPORT_SCHEMA,
         'frame_id': info.get('frame_id', 'stockpile'),
-        'units': 'm',
+        'units': 'm' if metric else 'model',
         'scale': scale,
         'keyframes': list(info.get('keyframes', [])),
-        'rocks': [r.as_dict() for r in rocks],
+        'rocks': rock_dicts,
         'gradation': grad,
         'segmentation': {
             **sp.as_dict(),

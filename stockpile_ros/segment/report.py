@@ -1,172 +1,543 @@
 """The result folder.
 
-report.json, segments.ply, rocks.csv, gradation.png, render.png, index.html.
+report.json, segments.ply, rocks.csv, gradation.png, render.png, keyframe.png (when a keyframe
+photo is at hand), index.html (self-contained: images inlined) and report.pdf (the same content,
+printable, drawn with matplotlib so that no browser or system library is needed).
 """
 
 from __future__ import annotations
 
 import base64
 import csv
-import html
-import io
 import json
+import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..meshio import LabelledMesh, write_labelled_mesh
+from .figures import find_keyframe, gradation_png, keyframe_png, render_png
+from .measure import PARTLY_SEEN
 from .pipeline import Analysis
-from .render import render_labels
+from .provenance import Provenance
+from .qa import LENGTH_UNITS, MASS_UNITS, ReportOptions
 
-__all__ = ['ROCK_COLUMNS', 'plot_gradation', 'write_result_folder']
+__all__ = ['ROCK_COLUMNS', 'page_context', 'write_pdf', 'write_result_folder']
 
-ROCK_COLUMNS = ('id', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area', 'visible_fraction',
-                'fer', 'sphericity', 'confidence')  # fmt: skip
+ROCK_COLUMNS = (
+    'id',
+    'a',
+    'b',
+    'c',
+    'esd',
+    'volume',
+    'mass',
+    'visible_area',
+    'visible_fraction',
+    'fer',
+    'sphericity',
+    'confidence',
+)
+
+_SCALE_HOW = {
+    'target': 'from the printed scale target seen in the keyframes',
+    'odometry': 'from the fit of the Structure-from-Motion camera path to the odometry',
+    'target+odometry': 'from the scale target and the odometry, combined by their uncertainties',
+    'given': 'the mesh units given by the user (--units), no target or odometry',
+}
+# Volume display units: litres for metric pages, cubic feet for inch pages.
+_VOLUME = {'mm': ('L', 1e-3), 'in': ('ft³', 0.0283168466)}
 
 
-def plot_gradation(grad: dict[str, Any], spec: dict[str, Any] | None = None) -> bytes:
-    """PNG of the gradation curves (percent passing by mass and by count against size, log axis)."""
+def _num(x: Any, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return '-'
+    return f'{x:.{digits}g}' if isinstance(x, float) else str(x)
+
+
+def _scale_text(scale: Mapping[str, Any]) -> str:
+    method = str(scale.get('method'))
+    if method == 'none':
+        return 'none: no metric scale was found; every length is in model units (no verdict)'
+    unc = scale.get('rel_uncertainty')
+    unc_text = (
+        f'relative uncertainty {100 * unc:.2g} %' if unc is not None else 'uncertainty unknown'
+    )
+    how = _SCALE_HOW.get(method, method)
+    mpu = scale.get('metres_per_unit')
+    return f'{method} ({how}): {_num(mpu, 6)} m per model unit, {unc_text}'
+
+
+def _reason(row: Mapping[str, Any], basis: str, length: Any, unit: str) -> str:
+    label = f'{row["key"].upper()} by {basis}'
+    if row['value'] is None or row['interval'][0] is None:
+        return str(row['reason'])
+    bounds = ', '.join(
+        f'{name} {length(row[name])}' for name in ('min', 'max') if row[name] is not None
+    )
+    lo, hi = row['interval']
+    verb = 'fails' if row['status'] == 'fail' else 'undecided'
+    return (
+        f'{label} {verb}: measured {length(row["value"])} {unit}, interval '
+        f'{length(lo)}-{length(hi)} {unit}, limits {bounds} {unit}'
+    )
+
+
+def _provenance(report: Mapping[str, Any], provenance: Provenance) -> dict[str, Any]:
+    scale = report['scale']
+    return {
+        **provenance.as_dict(),
+        'keyframes_used': len(report['keyframes']),
+        'scale': {
+            'method': scale.get('method'),
+            'rel_uncertainty': scale.get('rel_uncertainty'),
+            'how': _scale_text(scale),
+        },
+    }
+
+
+def page_context(
+    report: Mapping[str, Any],
+    options: ReportOptions,
+    images: Mapping[str, bytes],
+    keyframe_note: str,
+) -> dict[str, Any]:
+    """Everything the page and the PDF show, formatted in the display units.
+
+    Args:
+        report: The report.json dict, ``provenance`` included.
+        options: Display units and interval settings.
+        images: PNG bytes by name (``gradation``, ``render``, optionally ``keyframe``).
+        keyframe_note: Which keyframe is shown, or why none is.
+
+    """
+    metric = report['units'] != 'model'
+    lu = options.length_unit if metric else 'model units'
+    lf = LENGTH_UNITS[options.length_unit] if metric else 1.0
+    mu, mf = options.mass_unit, MASS_UNITS[options.mass_unit]
+    vu, vf = _VOLUME[options.length_unit] if metric else ('model units³', 1.0)
+    digits = 4 if options.length_unit == 'mm' else 3
+
+    def length(x: float | None) -> str:
+        return '-' if x is None else f'{x / lf:.{digits}g}'
+
+    def interval(pair: list[float | None]) -> str:
+        lo, hi = pair
+        return f'{"<" if lo is None else length(lo)} - {length(hi)}' if hi is not None else '-'
+
+    g = report['gradation']
+    spec = g['spec']
+    iv = g['intervals']
+    basis = spec.get('basis') or 'mass'
+    limits = [
+        {
+            'label': f'{row["key"].upper()} by {basis}',
+            'min': length(row['min']),
+            'max': length(row['max']),
+            'value': length(row['value']),
+            'interval': interval(row['interval']),
+            'margin': length(row['margin']) if row['margin'] is not None else '-',
+            'margin_pct': _num(100 * row['margin_rel'], 2)
+            if row['margin_rel'] is not None
+            else '-',
+            'status': row['status'],
+        }
+        for row in spec.get('limits', [])
+    ]
+    dsizes = [
+        {'name': f'D{p}', 'value': length(g[f'd{p}']), 'interval': interval(iv['mass'][f'd{p}'])}
+        for p in (10, 15, 30, 50, 60, 85, 100)
+    ]
+    dsizes += [
+        {
+            'name': name.capitalize(),
+            'value': _num(g[name]),
+            'interval': '-'
+            if iv[name][1] is None
+            else f'{_num(iv[name][0])} - {_num(iv[name][1])}',
+        }
+        for name in ('cu', 'cc')
+    ]
+    # The page states its reasons in the units of its tables (report.json keeps them in metres).
+    reasons = [
+        _reason(row, basis, length, lu) for row in spec.get('limits', []) if row['status'] != 'pass'
+    ]
+    if spec['verdict'] == 'FAIL':
+        reasons.sort(key=lambda text: 'fails' not in text)
+    rr = g.get('rosin_rammler')
+    head = ['id', f'a [{lu}]', f'b [{lu}]', f'c [{lu}]', f'ESD [{lu}]', f'volume [{vu}]']
+    head += [f'mass [{mu}]'] if metric else []
+    head += ['visible %', 'a/c', 'sphericity', 'confidence']
+    rows = []
+    for r in report['rocks']:
+        low = r['visible_fraction'] < PARTLY_SEEN
+        cells = [
+            f'{r["id"]}{" !" if low else ""}',
+            *(length(r[k]) for k in ('a', 'b', 'c', 'esd')),
+            _num(r['volume'] / vf if r['volume'] is not None else None),
+        ]
+        cells += [_num(r['mass'] / mf if r['mass'] is not None else None)] if metric else []
+        cells += [
+            f'{100 * r["visible_fraction"]:.0f}',
+            _num(r['fer'], 2),
+            _num(r['sphericity'], 2),
+            _num(r['confidence'], 2),
+        ]
+        rows.append({'low': low, 'cells': cells})
+    rock_note = (
+        'a >= b >= c measured on the visible surface (lower bounds for partly hidden rocks); '
+        'a/c is the flat-and-elongated ratio; volume and mass include the unseen side, completed '
+        f'as report.json says (segmentation.measure). Rows marked ! were seen on under '
+        f'{PARTLY_SEEN:.0%} of their surface.'
+    )
+    if not metric:
+        rock_note += ' No metric scale: lengths in model units, no masses.'
+    units_text = (
+        f'lengths in {lu}, masses in {mu}, volumes in {vu} (report.json and rocks.csv: m, kg)'
+        if metric
+        else 'model (no metric scale): no metres, no kilograms'
+    )
+    total = g.get('total_mass')
+    return {
+        'p': report['provenance'],
+        'spec': spec,
+        'reasons': reasons if spec['checked'] else list(spec['reasons']),
+        'g': g,
+        'verdict_class': str(spec['verdict']).replace(' ', ''),
+        'conf_pct': f'{iv["confidence"]:.0%}',
+        'scale_unc': f'{100 * iv["scale_rel_uncertainty"]:.2g} %',
+        'limits': limits,
+        'dsizes': dsizes,
+        'lu': lu,
+        'units_text': units_text,
+        'total_mass': f'{total / mf:.4g} {mu}' if metric and total is not None else '',
+        'rr': None
+        if not rr
+        else {
+            'd_c': length(rr['d_c']),
+            'n': f'{rr["n"]:.2f}',
+            'rms': f'{rr["rms_pct"]:.1f}',
+            'points': rr['points'],
+        },
+        'sieves': [
+            {
+                'size': f'{s["size_display"]:g}',
+                'mass': f'{s["mass"]:.1f}',
+                'count': f'{s["count"]:.1f}',
+            }
+            for s in g.get('sieves', [])
+        ],
+        'sieve_note': (
+            'Share of the measured rocks whose b is at most the size (the curve between rocks is '
+            'a step); metric sizes: ISO 565 / ASTM E11 openings to 125 mm, then R10 gauge sizes.'
+            if options.length_unit == 'mm'
+            else 'Share of the measured rocks whose b is at most the size (the curve between '
+            'rocks is a step); ASTM E11 inch designations to 5 in, then whole-inch sizes.'
+        ),
+        'images': {k: base64.b64encode(v).decode() for k, v in images.items()},
+        'keyframe_note': keyframe_note,
+        'partly_pct': f'{PARTLY_SEEN:.0%}',
+        'rock_head': head,
+        'rock_rows': rows,
+        'rock_note': rock_note,
+        'warnings': report.get('warnings', []),
+        'frame_id': report['frame_id'],
+        'schema': report['schema'],
+    }
+
+
+def _html(context: Mapping[str, Any]) -> str:
+    import jinja2
+
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader('stockpile_ros.segment', 'templates'),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+    )
+    return env.get_template('report.html.j2').render(**context)
+
+
+def _text_block(fig: Any, y: float, lines: list[str], size: float = 8.5) -> float:
+    import textwrap
+
+    for line in lines:
+        for part in textwrap.wrap(line, 118) or ['']:
+            fig.text(0.06, y, part, fontsize=size, va='top', family='DejaVu Sans')
+            y -= 0.0145 * size / 8.5
+    return y - 0.006
+
+
+def _table(fig: Any, y: float, header: list[str], rows: list[list[str]], height: float) -> float:
+    """Draw a table from ``y`` down over ``height`` (figure fraction); return the y under it."""
+    ax = fig.add_axes((0.06, y - height, 0.88, height))
+    ax.set_axis_off()
+    first = 0.16 if len(header) > 6 else 1.0 / len(header)
+    widths = [first] + [(1.0 - first) / (len(header) - 1)] * (len(header) - 1)
+    table = ax.table(
+        cellText=rows, colLabels=header, loc='upper center', cellLoc='right', colWidths=widths
+    )
+    table.auto_set_font_size(False)
+    table.set_fontsize(7.5 if len(header) < 9 else 6.5)
+    table.scale(1.0, 1.15)
+    return y - height - 0.012
+
+
+def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes]) -> None:
+    """Write the page's content as a printable A4 PDF (matplotlib's PdfPages)."""
+    import io
+
     import matplotlib
 
     matplotlib.use('Agg')
+    from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
+    from matplotlib.image import imread
 
-    fig = Figure(figsize=(7, 4.5), dpi=110)
-    ax = fig.add_subplot(1, 1, 1)
-    sizes = np.asarray(grad['sizes'], dtype=np.float64)
-    if len(sizes):
-        ax.step(sizes, grad['percent_passing_mass'], where='post', color='tab:blue', alpha=0.35)
-        ax.plot(sizes, grad['percent_passing_mass'], 'o-', color='tab:blue', label='by mass')
-        ax.plot(
-            sizes, grad['percent_passing_count'], 's--', color='tab:gray', ms=3, label='by count'
+    a4 = (8.27, 11.69)
+    p, spec = context['p'], context['spec']
+    with PdfPages(path) as pdf:
+        fig = Figure(figsize=a4)
+        fig.text(
+            0.06,
+            0.965,
+            f'Stockpile report{": " + p["pile"] if p["pile"] else ""}',
+            fontsize=16,
+            weight='bold',
+            va='top',
         )
-        ax.set_xscale('log')
-    for pct in (15, 50, 85):
-        d = grad.get(f'd{pct}')
-        if d:
-            ax.plot([d], [pct], 'kx')
-            ax.annotate(f'D{pct} {d:.3f} m', (d, pct), textcoords='offset points', xytext=(6, -10))
-    if spec:
-        for key, (lo, hi) in spec.get('limits', {}).items():
-            pct = int(key[1:])
-            xs = [x for x in (lo, hi) if x is not None]
-            if xs:
-                ax.plot(xs, [pct] * len(xs), '|-', color='tab:red', lw=2, ms=12)
-        ax.plot([], [], '|-', color='tab:red', label=f'class {spec["name"]} limits')
-    ax.set_xlabel(f'size {grad.get("size_measure", "b")} [m]')
-    ax.set_ylabel('percent passing [%]')
-    ax.set_ylim(0, 102)
-    ax.grid(True, which='both', alpha=0.3)
-    ax.legend(loc='lower right')
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format='png')
-    return buf.getvalue()
+        changed = ', '.join(f'{k} = {v}' for k, v in p['parameters_changed'].items())
+        y = _text_block(
+            fig,
+            0.935,
+            [
+                f'Site: {p["site"] or "(not given)"}    Pile: {p["pile"] or "(not given)"}    '
+                f'Operator: {p["operator"] or "(not given)"}',
+                f'Created (UTC): {p["created"]}    Tool: stockpile_ros {p["tool_version"]}    '
+                f'Keyframes used: {p["keyframes_used"]}',
+                f'Input: {p["input_path"]}',
+                f'sha256 {p["input_sha256"] or "-"} ({p["fingerprint_method"]})',
+                f'Scale: {p["scale"]["how"]}',
+                f'Units: {context["units_text"]}',
+                f'Parameters changed: {changed or "none (every parameter at its default)"}',
+            ],
+        )
+        colour = {'PASS': 'green', 'FAIL': 'red'}.get(spec['verdict'], '#b35900')
+        title = spec['verdict'] + (f' - class {spec["class"]}' if spec['class'] else '')
+        fig.text(0.06, y, title, fontsize=15, weight='bold', color=colour, va='top')
+        y = _text_block(fig, y - 0.03, [f'- {r}' for r in context['reasons']])
+        if spec['checked']:
+            y = _text_block(
+                fig,
+                y,
+                [
+                    f'Standard: {spec["standard"]}, edition {spec["edition"]}'
+                    + (f' ({spec["note"]})' if spec.get('note') else ''),
+                    f'Limits on b by {spec["basis"]}, sizes in {context["lu"]}; intervals '
+                    f'{context["conf_pct"]} (bootstrap over rocks with the scale uncertainty '
+                    f'{context["scale_unc"]}).',
+                ],
+            )
+            rows = [
+                [
+                    r['label'],
+                    r['min'],
+                    r['max'],
+                    r['value'],
+                    r['interval'],
+                    r['margin'],
+                    r['margin_pct'],
+                    r['status'],
+                ]
+                for r in context['limits']
+            ]
+            y = _table(
+                fig,
+                y,
+                ['limit', 'min', 'max', 'measured', 'interval', 'margin', 'margin %', 'status'],
+                rows,
+                0.02 * (len(rows) + 1),
+            )
+            y = _text_block(fig, y, [f'Class table caveat: {spec["caveat"] or "(none given)"}'])
+        for w in context['warnings']:
+            y = _text_block(fig, y, [f'Warning: {w}'], 7.5)
+        ds = context['dsizes']
+        y = _table(
+            fig,
+            y,
+            ['by mass', *(d['name'] for d in ds)],
+            [
+                [f'value [{context["lu"]}]', *(d['value'] for d in ds)],
+                # The interval's ends on two rows: one cell each is too narrow for both.
+                [f'{context["conf_pct"]} low', *(d['interval'].split(' - ')[0] for d in ds)],
+                [f'{context["conf_pct"]} high', *(d['interval'].split(' - ')[-1] for d in ds)],
+            ],
+            0.075,
+        )
+        rr = context['rr']
+        if rr:
+            y = _text_block(
+                fig,
+                y,
+                [
+                    f'Rosin-Rammler fit: d_c = {rr["d_c"]} {context["lu"]}, '
+                    f'n = {rr["n"]}, RMS residual {rr["rms"]} %.'
+                ],
+            )
+        grad = imread(io.BytesIO(images['gradation']), format='png')
+        h = min(0.36, y - 0.1)
+        if h > 0.15:
+            ax = fig.add_axes((0.06, y - h, 0.88, h))
+            ax.imshow(grad)
+            ax.set_axis_off()
+            y -= h + 0.01
+        fig.text(
+            0.06,
+            0.05,
+            'Checked by: ____________________   Date: ____________   '
+            'Signature: ____________________',
+            fontsize=9,
+        )
+        pdf.savefig(fig)
+        fig = Figure(figsize=a4)
+        fig.text(
+            0.06, 0.965, 'Segmented pile and keyframe photo', fontsize=13, weight='bold', va='top'
+        )
+        _text_block(
+            fig,
+            0.94,
+            [
+                f"Numbers are the table's rock ids; ! and orange outlines mark "
+                f'rocks seen on under {context["partly_pct"]} of their surface.'
+            ],
+        )
+        ax = fig.add_axes((0.06, 0.56, 0.88, 0.36))
+        ax.imshow(imread(io.BytesIO(images['render']), format='png'))
+        ax.set_axis_off()
+        if 'keyframe' in images:
+            ax = fig.add_axes((0.06, 0.15, 0.88, 0.36))
+            ax.imshow(imread(io.BytesIO(images['keyframe']), format='png'))
+            ax.set_axis_off()
+            fig.text(0.06, 0.53, context['keyframe_note'], fontsize=8.5)
+        else:
+            fig.text(0.06, 0.53, f'No keyframe photo: {context["keyframe_note"]}.', fontsize=9)
+        sieves = context['sieves']
+        if sieves:
+            _text_block(
+                fig, 0.135, [f'Percent passing at standard sizes. {context["sieve_note"]}'], 7.5
+            )
+            _table(
+                fig,
+                0.11,
+                [f'size [{context["lu"]}]', *(s['size'] for s in sieves)],
+                [
+                    ['by mass %', *(s['mass'] for s in sieves)],
+                    ['by count %', *(s['count'] for s in sieves)],
+                ],
+                0.06,
+            )
+        pdf.savefig(fig)
+        per_page = 48
+        rocks = context['rock_rows']
+        for start in range(0, max(len(rocks), 1), per_page):
+            fig = Figure(figsize=a4)
+            fig.text(0.06, 0.965, 'Rocks', fontsize=13, weight='bold', va='top')
+            y = _text_block(fig, 0.94, [context['rock_note']], 7.5)
+            chunk = [r['cells'] for r in rocks[start : start + per_page]]
+            if chunk:
+                _table(fig, y, context['rock_head'], chunk, 0.0165 * (len(chunk) + 1))
+            pdf.savefig(fig)
 
 
-def _png(image: np.ndarray) -> bytes:
-    from matplotlib.image import imsave
-
-    buf = io.BytesIO()
-    imsave(buf, image, format='png')
-    return buf.getvalue()
-
-
-def _fmt(x: Any, digits: int = 3) -> str:
-    if x is None:
-        return '-'
-    if isinstance(x, float):
-        return f'{x:.{digits}f}'
-    return str(x)
-
-
-def _html(report: dict[str, Any], grad_png: bytes, view_png: bytes) -> str:
-    g = report['gradation']
-    spec = g['spec']
-    if not spec['checked']:
-        verdict = 'not checked (no class given)'
-    elif spec['passed']:
-        verdict = f'<b style="color:green">PASS</b> class {html.escape(str(spec["class"]))}'
-    else:
-        reasons = ''.join(f'<li>{html.escape(r)}</li>' for r in spec['reasons'])
-        name = html.escape(str(spec['class']))
-        verdict = f'<b style="color:red">FAIL</b> class {name}<ul>{reasons}</ul>'
-    rows = ''.join(
-        '<tr>' + ''.join(f'<td>{_fmt(r.get(c))}</td>' for c in ROCK_COLUMNS) + '</tr>'
-        for r in report['rocks']
-    )
-    head = ''.join(f'<th>{c}</th>' for c in ROCK_COLUMNS)
-    ds = ', '.join(f'D{p} = {_fmt(g.get(f"d{p}"))} m' for p in (10, 15, 30, 50, 60, 85, 100))
-    scale = report['scale']
-    seg = report['segmentation']
-    warnings = ''.join(
-        f'<p style="color:#b35900"><b>Warning:</b> {html.escape(w)}</p>'
-        for w in report.get('warnings', [])
-    )
-    b64 = base64.b64encode
-    return f"""<!DOCTYPE html>
-<html><head><meta charset="utf-8"><title>Stockpile report</title>
-<style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}} img{{max-width:100%}}</style></head>
-<body><h1>Stockpile report</h1>
-<p>{g['rock_count']} rocks measured, total mass {_fmt(g['total_mass'], 1)} kg (visible rocks only).
-Segmentation mode <code>{html.escape(str(seg.get('mode')))}</code>, threshold
-{seg.get('threshold')},
-{seg.get('segments')} segments. Scale: {html.escape(str(scale.get('method')))}
-(relative uncertainty {_fmt(scale.get('rel_uncertainty'))}). Frame
-<code>{html.escape(report['frame_id'])}</code>,
-units m, kg.</p>
-<p>Specification: {verdict}</p>
-{warnings}
-<p>{ds}; Cu = {_fmt(g.get('cu'), 2)}, Cc = {_fmt(g.get('cc'), 2)}.</p>
-<h2>Segmented pile</h2>
-<img alt="segmented pile" src="data:image/png;base64,{b64(view_png).decode()}">
-<h2>Gradation</h2>
-<img alt="gradation curve" src="data:image/png;base64,{b64(grad_png).decode()}">
-<h2>Rocks</h2><p>Sizes in m, volume in m&sup3;, mass in kg, area in m&sup2;.
-a &ge; b &ge; c measured on the visible surface (lower bounds for partly hidden rocks); fer = a / c;
-the unseen side, for volume and mass, completed as documented in report.json
-(segmentation.measure).</p>
-<table><tr>{head}</tr>{rows}</table></body></html>
-"""
+def _write_csv(path: Path, analysis: Analysis, report: Mapping[str, Any]) -> None:
+    units = report['units']
+    with path.open('w', newline='') as out_csv:
+        writer = csv.writer(out_csv)
+        writer.writerow(
+            [*ROCK_COLUMNS[:1], 'x', 'y', 'z', *ROCK_COLUMNS[1:], 'faces', 'partly_seen', 'units']
+        )
+        faces = {r.id: r.faces for r in analysis.rocks}
+        for r in report['rocks']:
+            values = ['' if r[c] is None else r[c] for c in ROCK_COLUMNS[1:]]
+            writer.writerow(
+                [
+                    r['id'],
+                    *r['centroid'],
+                    *values,
+                    faces[r['id']],
+                    int(r['visible_fraction'] < PARTLY_SEEN),
+                    units,
+                ]
+            )
 
 
 def write_result_folder(
-    out: str | Path, analysis: Analysis, spec: dict[str, Any] | None = None
+    out: str | Path,
+    analysis: Analysis,
+    provenance: Provenance,
+    options: ReportOptions | None = None,
+    keyframes_dir: Path | None = None,
 ) -> dict[str, Path]:
-    """Write the result folder of docs/formats.md and return the paths written."""
+    """Write the result folder of docs/formats.md and return the paths written.
+
+    Adds ``provenance`` to ``analysis.report`` (so that what is published matches the files).
+
+    Args:
+        out: The result folder (created when missing).
+        analysis: The analysis, its report included.
+        provenance: Who, where, from what; filled by the caller.
+        options: Display units (None: the defaults).
+        keyframes_dir: The work folder's ``keyframes/``, for the keyframe photo; None: none shown.
+
+    """
+    opts = options or ReportOptions()
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    names = (
-        'report.json',
-        'segments.ply',
-        'rocks.csv',
-        'gradation.png',
-        'render.png',
-        'index.html',
-    )
-    paths = {name: folder / name for name in names}
     report = analysis.report
+    report['provenance'] = _provenance(report, provenance)
+    metric = report['units'] != 'model'
+    paths = {
+        name: folder / name
+        for name in (
+            'report.json',
+            'segments.ply',
+            'rocks.csv',
+            'gradation.png',
+            'render.png',
+            'index.html',
+            'report.pdf',
+        )
+    }
     paths['report.json'].write_text(json.dumps(report, indent=1, allow_nan=False))
+    labels = analysis.segmentation.labels
     write_labelled_mesh(
         paths['segments.ply'],
-        LabelledMesh(
-            analysis.vertices, analysis.faces, analysis.segmentation.labels, analysis.colors
-        ),
+        LabelledMesh(analysis.vertices, analysis.faces, labels, analysis.colors),
     )
-    with paths['rocks.csv'].open('w', newline='') as out_csv:
-        writer = csv.writer(out_csv)
-        writer.writerow([*ROCK_COLUMNS[:1], 'x', 'y', 'z', *ROCK_COLUMNS[1:], 'faces'])
-        faces = {r.id: r.faces for r in analysis.rocks}
-        for r in report['rocks']:
-            writer.writerow(
-                [r['id'], *r['centroid'], *(r[c] for c in ROCK_COLUMNS[1:]), faces[r['id']]]
+    _write_csv(paths['rocks.csv'], analysis, report)
+    unit = opts.length_unit if metric else None
+    images = {
+        'gradation': gradation_png(report, unit),
+        'render': render_png(analysis.vertices, analysis.faces, labels, report['rocks'], unit),
+    }
+    centroids = np.asarray([r['centroid'] for r in report['rocks']]).reshape(-1, 3)
+    view, note = find_keyframe(keyframes_dir, report['keyframes'], centroids)
+    if view is not None:
+        try:
+            images['keyframe'] = keyframe_png(
+                view, analysis.vertices, analysis.faces, labels, report['rocks']
             )
-    grad_png = plot_gradation(report['gradation'], spec)
-    paths['gradation.png'].write_bytes(grad_png)
-    view = render_labels(analysis.vertices, analysis.faces, analysis.segmentation.labels)
-    view_png = _png(view)
-    paths['render.png'].write_bytes(view_png)
-    paths['index.html'].write_text(_html(report, grad_png, view_png))
+            note = (
+                f'Keyframe {view.file.name} (stamp {view.stamp_ns}), the one that sees most rocks'
+            )
+        except OSError as exc:
+            note = str(exc)
+    for name in ('gradation', 'render', 'keyframe'):
+        if name in images:
+            paths[f'{name}.png'] = folder / f'{name}.png'
+            paths[f'{name}.png'].write_bytes(images[name])
+    context = page_context(report, opts, images, note)
+    paths['index.html'].write_text(_html(context))
+    write_pdf(paths['report.pdf'], context, images)
     return paths
