@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .components import result_lines
 from .errors import CaptureError, StockpileError
 from .recon.pipeline import WorkFolder, run_keyframes
 from .recon.sources import source_kind
@@ -168,21 +169,10 @@ def summary_lines(s: SourceSummary) -> tuple[list[str], list[str]]:
     out.append(f'{s.source}: {s.frames} {what}, {s.keyframes} keyframes'
                + (f' (decisions: {decisions})' if decisions else ''))  # fmt: skip
     out += _registration(s.work_dir)
-    metric = s.mesh is not None and s.mesh.get('units') == 'm'
     if s.mesh is not None:
         out.append(_scale_line(s.mesh))
     if s.report is not None:
-        g = s.report['gradation']
-        unit = 'm' if metric else 'model units (not metres)'
-        d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} {unit}'
-        out.append(f'{len(s.report["rocks"])} rocks, D50 {d50}')
-        spec = g.get('spec') or {}
-        if spec.get('checked') and metric:
-            reasons = '; '.join(spec.get('reasons', []))
-            verdict = 'PASS' if spec.get('passed') else f'FAIL: {reasons}'
-            out.append(f'class {spec.get("class")}: {verdict}')
-        elif spec.get('checked'):
-            out.append(f'class {spec.get("class")}: no verdict, the sizes are not in metres')
+        out += result_lines(s.report)
         out.append(f'result: {s.result_dir}')
     else:
         err.append('stockpile replay: no result: the capture could not be reconstructed and '

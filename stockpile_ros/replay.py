@@ -26,7 +26,8 @@ from .components import KeyframeComponent, ReconstructionComponent, Segmentation
 from .publish import DIAGNOSTIC_PREFIX, Publication, diagnostics, status
 from .runner import Outcome
 from .runs import claim
-from .settings import Settings, write_effective
+from .segment.provenance import Provenance
+from .settings import Settings, defaults, write_effective
 
 __all__ = ['ReplaySummary', 'replay']
 
@@ -166,12 +167,10 @@ class _Rig:
         if failed:
             self.publish(stamp_ns, failed)
             return
-        seg = self.segmentation.run(
-            self.settings,
-            stamp_ns,
-            lambda pubs: self.publish(stamp_ns, pubs),
-            self.summary.result_dir,
-        )
+        made_from = Provenance.for_input(self.summary.bag, self.settings.values, defaults())
+        seg = self.segmentation.run(self.settings, stamp_ns,
+                                    lambda pubs: self.publish(stamp_ns, pubs),
+                                    self.summary.result_dir, made_from)  # fmt: skip
         self.summary.outcome = seg
         if seg.ok and seg.analysis:
             self.summary.report = seg.analysis.report

@@ -25,6 +25,7 @@ from typing import IO, Any, Literal
 from .errors import StockpileError
 
 __all__ = [
+    'FINGERPRINT_METHOD',
     'RUN_FILE',
     'RunRecord',
     'claim',
@@ -40,6 +41,9 @@ _SCHEMA = 'stockpile-run/1'
 # What a fingerprint reads of each file: its size and its first and last MiB (a bag's chunks
 # change throughout; its head holds the schema and the first messages, its tail the summary).
 _SAMPLE = 1 << 20
+
+FINGERPRINT_METHOD = 'sha256 over each file: its relative name, its size, its first and last MiB'
+"""How :func:`fingerprint_input` identifies an input, in words (the report says it)."""
 
 State = Literal['running', 'complete', 'failed', 'interrupted']
 

@@ -1,6 +1,5 @@
 from __future__ import annotations
 
-import hashlib
 import math
 from pathlib import Path
 
@@ -114,14 +113,12 @@ def test_fingerprints(tmp_path) -> None:
     file = tmp_path / 'mesh.ply'
     file.write_bytes(b'ply\n')
     digest, how = fingerprint(file)
-    assert digest == hashlib.sha256(b'ply\n').hexdigest()
-    assert how == 'sha256 of the file'
+    assert len(digest) == 64 and 'first and last MiB' in how
     bag = tmp_path / 'bag'
     bag.mkdir()
     (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')
     (bag / 'bag_0.mcap').write_bytes(b'x' * 10)
-    first, how = fingerprint(bag)
-    assert 'metadata.yaml' in how
+    first, _ = fingerprint(bag)
     (bag / 'bag_0.mcap').write_bytes(b'x' * 11)
     assert fingerprint(bag)[0] != first
     missing = Provenance.for_input(tmp_path / 'gone', {'report.site': 'Q'}, {})

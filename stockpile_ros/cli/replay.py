@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..components import result_lines
 from ..recon.sources import source_kind
 from ..replay import ReplaySummary, replay
 from .parameters import add_parameter_arguments, add_run_arguments, settings_from_args
@@ -66,17 +67,8 @@ def _print_summary(s: ReplaySummary) -> None:
         metric = scale.get('method') != 'none'
         note = '' if metric else ': every size is in model units, not metres'
         print(f'scale: {scale.get("method")}{unc}{note}')
-        g = s.report['gradation']
-        unit = 'm' if metric else 'model units'
-        d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} {unit}'
-        print(f'{len(s.report["rocks"])} rocks, D50 {d50}')
-        spec = g.get('spec') or {}
-        if spec.get('checked') and not metric:
-            print(f'class {spec.get("class")}: no verdict, the sizes are not in metres')
-        elif spec.get('checked'):
-            reasons = '; '.join(spec.get('reasons', []))
-            verdict = 'PASS' if spec.get('passed') else f'FAIL: {reasons}'
-            print(f'class {spec.get("class")}: {verdict}')
+        for line in result_lines(s.report):
+            print(line)
         print(f'result: {s.result_dir}')
     else:
         print('no result: the capture could not be reconstructed and segmented', file=sys.stderr)

@@ -7,7 +7,7 @@ them to rclpy; :mod:`stockpile_ros.replay` drives them from a bag. Topics: :mod:
 
 from .keyframes import WAIT_NS, KeyframeComponent, KeyframeCounts
 from .reconstruction import Emit, ReconstructionComponent
-from .segmentation import SegmentationComponent, verdict
+from .segmentation import SegmentationComponent, result_lines, verdict
 
 __all__ = [
     'WAIT_NS',
@@ -16,5 +16,6 @@ __all__ = [
     'KeyframeCounts',
     'ReconstructionComponent',
     'SegmentationComponent',
+    'result_lines',
     'verdict',
 ]

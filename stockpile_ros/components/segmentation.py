@@ -17,22 +17,38 @@ from ..publish import Publication, capture_warnings, diagnostics, segmentation_o
 from ..recon.collector import CollectorState
 from ..recon.pipeline import WorkFolder
 from ..runner import Outcome, run_segmentation
+from ..segment.provenance import Provenance
 from ..settings import Settings
 from .handoff import read_surface
 from .reconstruction import Emit
 
-__all__ = ['SegmentationComponent', 'verdict']
+__all__ = ['SegmentationComponent', 'result_lines', 'verdict']
+
+
+def result_lines(report: dict[str, Any]) -> list[str]:
+    """Return what a run found, for people: rocks and D50, then the class and its verdict.
+
+    Sizes are in metres only when the run had a metric scale (``units`` is ``model`` else);
+    the verdict is PASS, FAIL (with the reasons), UNDECIDED (an interval straddles a limit) or
+    REFUSED (no metric scale).
+    """
+    g = report['gradation']
+    unit = 'model units' if report.get('units') == 'model' else 'm'
+    d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} {unit}'
+    lines = [f'{len(report["rocks"])} rocks, D50 {d50}']
+    spec = g.get('spec') or {}
+    if spec.get('class'):
+        why = '; '.join(spec.get('reasons', []))
+        said = spec.get('verdict', 'NOT CHECKED')
+        lines.append(
+            f'class {spec["class"]}: {said}' + (f': {why}' if why and said != 'PASS' else '')
+        )
+    return lines
 
 
 def verdict(report: dict[str, Any]) -> str:
-    """One line: rocks, D50 and the class verdict of a report."""
-    g = report['gradation']
-    d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} m'
-    text = f'{len(report["rocks"])} rocks, D50 {d50}'
-    spec = g.get('spec') or {}
-    if spec.get('checked'):
-        text += f'; class {spec.get("class")}: ' + ('PASS' if spec.get('passed') else 'FAIL')
-    return text
+    """Return the results in one line (the final status's message)."""
+    return '; '.join(result_lines(report))
 
 
 class SegmentationComponent:
@@ -63,7 +79,12 @@ class SegmentationComponent:
         return []
 
     def run(
-        self, settings: Settings, stamp_ns: int, emit: Emit, result_dir: Path | None = None
+        self,
+        settings: Settings,
+        stamp_ns: int,
+        emit: Emit,
+        result_dir: Path | None = None,
+        provenance: Provenance | None = None,
     ) -> Outcome:
         """Segment the surface last received; publications go to ``emit``.
 
@@ -72,13 +93,15 @@ class SegmentationComponent:
             stamp_ns: Stamp of the results (the surface's).
             emit: Receives each group of publications.
             result_dir: Result folder (``<work_dir>/result`` by default).
+            provenance: What the result was made from (a replay names its bag; live, the
+                surface received is the input).
 
         Returns:
             The segmentation's outcome.
 
         """
         f, held = self.f, self.held
-        outcome = run_segmentation(settings, self.work.surface, result_dir)
+        outcome = run_segmentation(settings, self.work.surface, result_dir, provenance)
         if not outcome.ok or outcome.analysis is None:
             emit([
                 diagnostics(f, stamp_ns, 'segment', 'ERROR', outcome.reason,

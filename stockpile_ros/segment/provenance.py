@@ -1,15 +1,12 @@
 """Where a result came from: the provenance block of report.json and of the page.
 
-A QA record has to name its input, so the input is fingerprinted, cheaply: a file by the sha256 of
-its bytes; a folder (a rosbag2 bag) by the sha256 of its ``metadata.yaml`` followed by the name
-and size of every file in it, in sorted order, so a multi-gigabyte bag is identified without
-reading its messages (a bag rewritten to the same sizes with other content would not be told
-apart; its metadata.yaml, which holds message counts and time stamps, normally is).
+A QA record has to name its input, so the input is fingerprinted, cheaply, as the run record
+fingerprints it (:data:`stockpile_ros.runs.FINGERPRINT_METHOD`): a multi-gigabyte bag is
+identified without reading all its messages.
 """
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
@@ -17,35 +14,21 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
+from ..runs import FINGERPRINT_METHOD, fingerprint_input
 
 __all__ = ['Provenance', 'changed_parameters', 'fingerprint']
-
-_CHUNK = 1 << 20
 
 
 def fingerprint(path: str | Path) -> tuple[str, str]:
     """Return ``(sha256 hex, how it was computed)`` for an input file or bag folder.
 
+    The same fingerprint as the run record's (:func:`stockpile_ros.runs.fingerprint_input`).
+
     Raises:
         OSError: The path cannot be read.
 
     """
-    target = Path(path)
-    digest = hashlib.sha256()
-    if target.is_dir():
-        meta = target / 'metadata.yaml'
-        if meta.is_file():
-            digest.update(meta.read_bytes())
-        for item in sorted(p for p in target.rglob('*') if p.is_file()):
-            digest.update(
-                f'{item.relative_to(target).as_posix()}\0{item.stat().st_size}\n'.encode()
-            )
-        how = 'sha256 of metadata.yaml, then the relative path and size of every file (sorted)'
-        return digest.hexdigest(), how
-    with target.open('rb') as data:
-        for chunk in iter(lambda: data.read(_CHUNK), b''):
-            digest.update(chunk)
-    return digest.hexdigest(), 'sha256 of the file'
+    return fingerprint_input(Path(path)), FINGERPRINT_METHOD
 
 
 def changed_parameters(
