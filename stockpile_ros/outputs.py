@@ -497,11 +497,16 @@ def rock_array(
 
 
 def gradation_msg(
-    f: MessageFactory, gradation: Mapping[str, Any], stamp_ns: int, frame_id: str
+    f: MessageFactory,
+    gradation: Mapping[str, Any],
+    stamp_ns: int,
+    frame_id: str,
+    units: str = 'm',
 ) -> Any:
     """Build ``stockpile_msgs/Gradation`` from ``report.json``'s ``gradation`` dict.
 
-    Null sizes become NaN; a missing or null ``spec`` gives an empty class, not checked, not passed.
+    Null sizes become NaN; a missing or null ``spec`` gives an empty class, not checked, not
+    passed, no verdict. ``units`` is the report's (``m``, or ``model`` without a metric scale).
 
     Raises:
         ValueError: A required key is missing.
@@ -523,7 +528,9 @@ def gradation_msg(
         spec_class=str(spec.get('class') or ''),
         checked=bool(spec.get('checked', False)),
         passed=bool(spec.get('passed') or False),
+        verdict=str(spec.get('verdict') or ''),
         reasons=[str(r) for r in spec.get('reasons', [])],
+        units=str(units),
         **numbers,
     )
 

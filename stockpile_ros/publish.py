@@ -249,5 +249,6 @@ def segmentation_outputs(
          pointcloud2(f, centroids, colors, labels, stamp_ns, frame_id)),
         (topics.ROCK_MARKERS, marker_array(f, rocks, stamp_ns, frame_id, **mesh_args)),
         (topics.ROCKS, rock_array(f, rocks, report['scale'], stamp_ns, frame_id)),
-        (topics.GRADATION, gradation_msg(f, report['gradation'], stamp_ns, frame_id)),
+        (topics.GRADATION, gradation_msg(f, report['gradation'], stamp_ns, frame_id,
+                                         str(report.get('units', 'm')))),
     ]  # fmt: skip

@@ -43,5 +43,9 @@ def test_foxglove_plots_passing_against_size_and_shows_the_verdict() -> None:
     assert plot['xAxisPath']['value'] == '/stockpile/gradation.sizes[:]'
     assert {p['value'] for p in plot['paths']} >= {'/stockpile/gradation.percent_passing_mass[:]'}
     verdict = config['Indicator!verdict']
-    assert verdict['path'] == '/stockpile/gradation.passed'
-    assert any(rule['label'] == 'PASS' for rule in verdict['rules'])
+    assert verdict['path'] == '/stockpile/gradation.verdict'
+    shown = {rule['rawValue'] for rule in verdict['rules']}
+    assert shown == {'PASS', 'FAIL', 'UNDECIDED', 'REFUSED'}
+    # Every field the layout reads is in the message.
+    fields = (DASHBOARDS.parent / 'msg_schemas' / 'msg' / 'Gradation.msg').read_text()
+    assert 'string verdict' in fields and 'string units' in fields

@@ -195,3 +195,22 @@ def test_a_keyframe_photo_gets_the_rocks_outlined(tmp_path) -> None:
     assert bright > 100
     html = (out / 'index.html').read_text()
     assert 'Keyframe kf_1.png' in html and 'No keyframe photo' not in html
+
+
+def test_the_result_folder_is_replaced_whole_never_mixed(tmp_path, capsys) -> None:
+    v, f, _ = small_pile()
+    mesh_path = tmp_path / 'mesh.ply'
+    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    out = tmp_path / 'result'
+    argv = ['segment', str(mesh_path), '--out', str(out), '--units', 'm']
+    assert main(argv) == 0
+    (out / 'stale.txt').write_text('from an earlier run')
+    assert main(argv) == 0  # a rerun replaces the folder: no file of the earlier run is left
+    assert not (out / 'stale.txt').exists() and (out / 'report.json').is_file()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith('.result')]
+    other = tmp_path / 'notes'
+    other.mkdir()
+    (other / 'mine.txt').write_text('keep me')
+    assert main(['segment', str(mesh_path), '--out', str(other), '--units', 'm']) == 2
+    assert 'holds files but no result' in capsys.readouterr().err
+    assert (other / 'mine.txt').read_text() == 'keep me'

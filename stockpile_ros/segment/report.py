@@ -11,12 +11,15 @@ import base64
 import csv
 import json
 import math
+import os
+import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..errors import StockpileError
 from ..meshio import LabelledMesh, write_labelled_mesh
 from .figures import find_keyframe, gradation_png, keyframe_png, render_png
 from .measure import PARTLY_SEEN
@@ -482,6 +485,8 @@ def write_result_folder(
     """Write the result folder of docs/formats.md and return the paths written.
 
     Adds ``provenance`` to ``analysis.report`` (so that what is published matches the files).
+    The folder is written beside and renamed into place: it never holds half a result, nor a
+    mix of this run's files and an earlier run's.
 
     Args:
         out: The result folder (created when missing).
@@ -492,8 +497,14 @@ def write_result_folder(
 
     """
     opts = options or ReportOptions()
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
+    final = Path(out)
+    if final.is_dir() and any(final.iterdir()) and not (final / 'report.json').exists():
+        # It is replaced whole: never a folder of someone else's files.
+        raise StockpileError(f'{final} holds files but no result; choose an empty folder')
+    final.parent.mkdir(parents=True, exist_ok=True)
+    folder = final.with_name(f'.{final.name}.{os.getpid()}.tmp')
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir()
     report = analysis.report
     report['provenance'] = _provenance(report, provenance)
     metric = report['units'] != 'model'
@@ -540,4 +551,9 @@ def write_result_folder(
     context = page_context(report, opts, images, note)
     paths['index.html'].write_text(_html(context))
     write_pdf(paths['report.pdf'], context, images)
-    return paths
+    old = final.with_name(f'.{final.name}.{os.getpid()}.old')
+    if final.exists():
+        final.replace(old)
+    folder.replace(final)
+    shutil.rmtree(old, ignore_errors=True)
+    return {name: final / path.name for name, path in paths.items()}
