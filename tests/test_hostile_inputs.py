@@ -458,7 +458,7 @@ def test_not_a_bag_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 BAD_PARAMETERS = {
     'segment.threshold=.nan': 'not a finite number',
     'measure.specific_gravity=.inf': 'not a finite number',
-    'sfm.matcher=bogus': 'is not one of sequential, exhaustive',
+    'sfm.matcher=bogus': "'bogus' is not one of",
     'sfm.overlap=0': 'is outside [1, 1000]',
     'recon.target=charuco:1x1:0.08:0.06:DICT_4X4_50': 'at least 2 x 2 squares',
     'sfm.nosuch=1': "unknown parameter 'sfm.nosuch'",

@@ -150,7 +150,11 @@ def test_replay_of_photos_without_a_target_says_model_units(
     assert status == 0, printed
     assert (out / 'result' / 'report.json').exists() and not list(out.glob('*.mcap'))
     assert 'output bag: none' in printed and 'registered 16/16' in printed
-    assert 'model units (not metres)' in printed and 'no target was given' in printed
+    assert (
+        'in model units, not metres' in printed
+        and 'D50 ' in printed
+        and 'no target was given' in printed
+    )
     assert ' m\n' not in printed and ' m,' not in printed
     mesh = json.loads((out / 'work' / 'mesh' / 'mesh.json').read_text())
     assert mesh['units'] == 'model' and mesh['scale']['method'] == 'none'
