@@ -204,6 +204,10 @@ def view_angle_change(
             return float('nan'), ''
         p1 = np.ascontiguousarray(key_rays[:, :2] / key_rays[:, 2:])
         p2 = np.ascontiguousarray(rays[:, :2] / rays[:, 2:])
+        # RANSAC draws from OpenCV's per-thread generator: seeded here, the estimate depends on
+        # the two frames alone, not on what ran before in the thread (live, each callback may
+        # run in another executor thread; unseeded, live and replay kept other keyframes).
+        cv2.setRNGSeed(0)
         essential, mask = cv2.findEssentialMat(
             p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.999, threshold=threshold
         )
