@@ -17,6 +17,7 @@ from stockpile_ros.segment.segmentation import (
     RESOLVABLE_EDGES,
     SegmentParams,
     class_min_rock_b,
+    drop_facing_down,
     median_edge,
     merge_fragments,
     rock_scale,
@@ -177,3 +178,12 @@ def test_median_edge_leaves_degenerate_edges_out() -> None:
     f = np.array([[0, 1, 2], [0, 3, 1]])
     assert median_edge(v, f) == pytest.approx(1.0)
     assert median_edge(np.zeros((3, 3)), np.array([[0, 1, 2]])) == 0.0
+
+
+def test_a_lone_region_facing_down_is_dropped() -> None:
+    # 1 1 1 2 2 | 3 3: regions 2 and 3 face down; 2 borders region 1, 3 borders nothing.
+    adj = FaceAdjacency(7, np.array([0, 1, 2, 3, 5]), np.array([1, 2, 3, 4, 6]))
+    labels = np.array([1, 1, 1, 2, 2, 3, 3], dtype=np.int32)
+    lift = np.array([1.0, 1.0, 1.0, -1.0, 0.5, -1.0, -1.0])
+    assert drop_facing_down(labels, adj, lift).tolist() == [1, 1, 1, 2, 2, 0, 0]
+    assert drop_facing_down(labels, adj, np.abs(lift)).tolist() == labels.tolist()
