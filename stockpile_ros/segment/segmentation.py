@@ -15,12 +15,13 @@ Two presets of :class:`SegmentParams`:
   creases, and a looser test merges touching rocks); seeds from the most convex faces; every
   region smaller than a share of the smallest rock of interest is a fragment and is merged into
   the neighbouring region it shares the longest border with; the valley faces are handed back to
-  the regions they border, growing from both sides of a valley until they meet; then neighbouring
-  regions whose union stays convex across their shared border are joined (on reconstructed piles,
-  noise stops the search inside single rocks: this took precision from 0.38 to 1.0 on one and from
-  0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region that a wider valley cuts
-  into two or more large parts is split into them (two touching rocks that the search joined
-  through a gap in the narrower valley, see ``split_at_valleys``).
+  the regions they border, growing from both sides of a valley until they meet; a region that
+  faces down and borders only ground is dropped (an underside cut off from its rock); then
+  neighbouring regions whose union stays convex across their shared border are joined (on
+  reconstructed piles, noise stops the search inside single rocks: this took precision from 0.38
+  to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region
+  that a wider valley cuts into two or more large parts is split into them (two touching rocks
+  that the search joined through a gap in the narrower valley, see ``split_at_valleys``).
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
