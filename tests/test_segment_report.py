@@ -67,10 +67,14 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     assert prov['keyframes_used'] == 1 and prov['scale']['method'] == 'target'
     assert prov['created'].endswith('+00:00') and prov['tool_version']
     assert report['segmentation']['mode'] == 'default'
-    # The class checked sets the smallest rock of interest: half class I's smallest D15.
+    # The class checked asks for the smallest rock of interest: half class I's smallest D15. This
+    # mesh is too coarse for it: the floor of min_rock_edges applies, and the result says so.
     scale = report['segmentation']['scale']
-    assert scale['source'] == 'class' and scale['min_rock_b'] == pytest.approx(0.5 * 3.7 * 0.0254)
+    assert scale['source'] == 'class' and scale['requested'] == pytest.approx(0.5 * 3.7 * 0.0254)
     assert scale['edge'] > 0
+    floor = report['segmentation']['min_rock_edges'] * scale['edge']
+    assert scale['min_rock_b'] == pytest.approx(max(scale['requested'], floor))
+    assert any('the mesh resolves' in w for w in report['warnings'])
     assert report['mesh']['faces'] == len(f)
     assert any('kf_00044_000145.png' in w for w in report['warnings'])
     seg = read_labelled_mesh(out / 'segments.ply')

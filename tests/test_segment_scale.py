@@ -12,10 +12,12 @@ from segment_fixtures import height_field, small_pile
 from stockpile_ros.segment.adjacency import FaceAdjacency
 from stockpile_ros.segment.gradation import load_class_table
 from stockpile_ros.segment.measure import measure_rocks
+from stockpile_ros.segment.pipeline import analyse_mesh
 from stockpile_ros.segment.segmentation import (
     RESOLVABLE_EDGES,
     SegmentParams,
     class_min_rock_b,
+    drop_facing_down,
     median_edge,
     merge_fragments,
     rock_scale,
@@ -121,18 +123,43 @@ def test_hundreds_of_rocks_are_not_fragments_of_the_pile() -> None:
 
 def test_the_smallest_rock_comes_from_the_parameter_the_class_or_the_mesh() -> None:
     params = SegmentParams()
-    mesh = rock_scale(params, 0.005)
-    assert (mesh.source, mesh.min_rock_b) == ('mesh', pytest.approx(params.min_rock_edges * 0.005))
+    mesh = rock_scale(params, 0.001)
+    assert (mesh.source, mesh.min_rock_b) == ('mesh', pytest.approx(params.min_rock_edges * 0.001))
     spec = load_class_table()['classes']['I']
-    # Class I: D15 at least 3.7 in; half of it.
+    # Class I: D15 at least 3.7 in; half of it, on a mesh fine enough to resolve it.
     assert class_min_rock_b(spec) == pytest.approx(0.5 * 3.7 * 0.0254)
-    from_class = rock_scale(params, 0.005, spec)
+    from_class = rock_scale(params, 0.001, spec)
     assert (from_class.source, from_class.min_rock_b) == ('class', pytest.approx(0.047, abs=1e-3))
-    given = rock_scale(replace(params, min_rock_b=0.3), 0.005, spec)
+    assert from_class.requested == from_class.min_rock_b
+    given = rock_scale(replace(params, min_rock_b=0.3), 0.001, spec)
     assert (given.source, given.min_rock_b) == ('parameter', 0.3)
-    # Never under what the mesh can resolve.
-    tiny = rock_scale(replace(params, min_rock_b=1e-4), 0.005)
-    assert tiny.min_rock_b == pytest.approx(RESOLVABLE_EDGES * 0.005)
+
+
+def test_no_scale_goes_under_what_the_mesh_resolves() -> None:
+    params = SegmentParams()
+    spec = load_class_table()['classes']['I']
+    # Class I's 47 mm on a mesh of 4 mm edges: under min_rock_edges, raised to it, and recorded.
+    coarse = rock_scale(params, 0.004, spec)
+    assert coarse.source == 'class'
+    assert coarse.requested == pytest.approx(0.047, abs=1e-3)
+    assert coarse.min_rock_b == pytest.approx(params.min_rock_edges * 0.004)
+    tiny = rock_scale(replace(params, min_rock_b=1e-4, min_rock_edges=RESOLVABLE_EDGES), 0.004)
+    assert tiny.min_rock_b == pytest.approx(RESOLVABLE_EDGES * 0.004)
+    # The radii keep their share of a large rock of interest, and their floor in edges under it.
+    large = rock_scale(replace(params, min_rock_b=1.0), 0.004)
+    assert large.valley_radius == pytest.approx(params.valley_radius_b * 1.0)
+    assert large.split_radius == pytest.approx(params.split_radius_b * 1.0)
+    assert coarse.valley_radius == pytest.approx(params.valley_min_edges * 0.004)
+    assert coarse.split_radius == pytest.approx(params.split_min_edges * 0.004)
+
+
+def test_a_class_finer_than_the_mesh_is_warned_about() -> None:
+    v, f = _bumps(3, 32)
+    spec = load_class_table()['classes']['I']
+    # Median edges of about 43 mm: class I's 47 mm is about one of them.
+    warned = analyse_mesh(v, f, spec=spec).report['warnings']
+    assert any('the mesh resolves' in w for w in warned)
+    assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report['warnings'])
 
 
 def test_fragments_are_judged_by_area_not_by_face_count() -> None:
@@ -151,3 +178,12 @@ def test_median_edge_leaves_degenerate_edges_out() -> None:
     f = np.array([[0, 1, 2], [0, 3, 1]])
     assert median_edge(v, f) == pytest.approx(1.0)
     assert median_edge(np.zeros((3, 3)), np.array([[0, 1, 2]])) == 0.0
+
+
+def test_a_lone_region_facing_down_is_dropped() -> None:
+    # 1 1 1 2 2 | 3 3: regions 2 and 3 face down; 2 borders region 1, 3 borders nothing.
+    adj = FaceAdjacency(7, np.array([0, 1, 2, 3, 5]), np.array([1, 2, 3, 4, 6]))
+    labels = np.array([1, 1, 1, 2, 2, 3, 3], dtype=np.int32)
+    lift = np.array([1.0, 1.0, 1.0, -1.0, 0.5, -1.0, -1.0])
+    assert drop_facing_down(labels, adj, lift).tolist() == [1, 1, 1, 2, 2, 0, 0]
+    assert drop_facing_down(labels, adj, np.abs(lift)).tolist() == labels.tolist()

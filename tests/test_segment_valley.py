@@ -144,7 +144,7 @@ def test_two_domes_in_one_region_are_split_at_the_crease_between_them() -> None:
     edge = seg.scale.edge
     ground = params.ground_tolerance_edges * edge
     labels = np.where(geom.centroids[:, 2] > ground, 1, 0).astype(np.int32)
-    radius = params.split_radius_b * seg.scale.min_rock_b
+    radius = seg.scale.split_radius
     deep = valley_depths(v, f, geom, [radius], edge)[0] > params.split_depth_ratio * radius
     split = split_at_valleys(labels, seg.adjacency, geom.areas, deep, params.split_min_share)
     xy = geom.centroids[:, :2]

@@ -94,6 +94,19 @@ def principal_axes(
     return out
 
 
+def _resolution_warnings(seg: Segmentation) -> list[str]:
+    """Return a warning when the smallest rock of interest asked for is finer than the mesh."""
+    scale = seg.scale
+    if scale.requested >= scale.min_rock_b:
+        return []
+    return [
+        f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, under '
+        f'the {seg.params.min_rock_edges:g} median edge lengths ({scale.min_rock_b:.3f} m) the '
+        'mesh resolves: rocks under that size may be joined to a neighbour. Capture the pile '
+        'closer, or reconstruct it finer.'
+    ]
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -175,7 +188,9 @@ def analyse_mesh(
                 'fer': 'a / c',
             },
         },
-        'warnings': _reconstruction_warnings(info) + visibility_warnings(rocks),
+        'warnings': _reconstruction_warnings(info)
+        + _resolution_warnings(seg)
+        + visibility_warnings(rocks),
         'mesh': {'faces': len(f), 'vertices': len(v), 'source': source},
     }
     return Analysis(v, f, colors, seg, rocks, json_safe(report))

@@ -15,12 +15,13 @@ Two presets of :class:`SegmentParams`:
   creases, and a looser test merges touching rocks); seeds from the most convex faces; every
   region smaller than a share of the smallest rock of interest is a fragment and is merged into
   the neighbouring region it shares the longest border with; the valley faces are handed back to
-  the regions they border, growing from both sides of a valley until they meet; then neighbouring
-  regions whose union stays convex across their shared border are joined (on reconstructed piles,
-  noise stops the search inside single rocks: this took precision from 0.38 to 1.0 on one and from
-  0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region that a wider valley cuts
-  into two or more large parts is split into them (two touching rocks that the search joined
-  through a gap in the narrower valley, see ``split_at_valleys``).
+  the regions they border, growing from both sides of a valley until they meet; a region that
+  faces down and borders only ground is dropped (an underside cut off from its rock); then
+  neighbouring regions whose union stays convex across their shared border are joined (on
+  reconstructed piles, noise stops the search inside single rocks: this took precision from 0.38
+  to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region
+  that a wider valley cuts into two or more large parts is split into them (two touching rocks
+  that the search joined through a gap in the narrower valley, see ``split_at_valleys``).
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
@@ -30,6 +31,12 @@ rock of interest, ``min_rock_b`` (given, from the class being checked, or a numb
 lengths, see :func:`rock_scale`): the fragment area and the valley scales are in its units, and
 the valley depths are shares of their scale (a crease angle, not a length). Nothing depends on
 the size of the whole pile.
+
+Resolution: a reconstructed mesh shows nothing finer than a few of its edges (the noise of the
+dense points is smoothed by Poisson over about that scale), so no scale goes under it: the
+smallest rock of interest is never under ``min_rock_edges`` edge lengths, and the valley and split
+radii never under ``valley_min_edges`` and ``split_min_edges``. A smaller rock asked for (by a
+class, say) keeps the larger scales; :attr:`RockScale.requested` records what was asked.
 """
 
 from __future__ import annotations
@@ -60,6 +67,7 @@ __all__ = [
     'SegmentParams',
     'Segmentation',
     'class_min_rock_b',
+    'drop_facing_down',
     'hand_back',
     'median_edge',
     'merge_convex_borders',
@@ -81,8 +89,8 @@ I32 = npt.NDArray[np.int32]
 #: degenerate mesh (a tiny median edge) or a large rock of interest on a fine mesh cannot make it
 #: run for ever.
 MAX_SMOOTHING_PASSES = 2 * 32**2
-#: A rock under this many median edge lengths across cannot be told from mesh noise: the smallest
-#: rock of interest is never taken smaller.
+#: The least ``min_rock_edges`` can be set to: a rock under this many median edge lengths across
+#: cannot be told from mesh noise even on a noise-free mesh.
 RESOLVABLE_EDGES = 4.0
 #: When a class is checked, the smallest rock of interest is this share of the smallest size the
 #: class names (the lower limit of its D15): the rocks under D15 carry 15 % of the mass and must
@@ -110,9 +118,14 @@ class SegmentParams:
         min_rock_b: Intermediate dimension b of the smallest rock of interest [m]; 0: half the
             smallest size of the class being checked (the lower limit of its D15) when a class is
             checked, else ``min_rock_edges`` median edge lengths. Never taken under
-            ``RESOLVABLE_EDGES`` (4) edge lengths.
-        min_rock_edges: The smallest rock of interest when neither ``min_rock_b`` nor a class
-            gives it [in median edge lengths].
+            ``min_rock_edges`` edge lengths.
+        min_rock_edges: The smallest rock a mesh resolves: the smallest rock of interest when
+            neither ``min_rock_b`` nor a class gives it, and its floor when one does [in median
+            edge lengths; at least ``RESOLVABLE_EDGES`` (4)]. On reconstructed meshes the
+            search's pieces of single rocks that no clean-up joins reach about this size
+            (12-55 cm2, square roots of 9-19 edge lengths, on the demo pile): a class-derived
+            ``min_rock_b`` of 12 edge lengths (class I on the demo pile, 3.8 mm edges) took the
+            result from 14 to 18 rocks there even with every other floor; 20 kept 14.
         ground_tolerance_edges: Height above ``z = 0`` under which a face is ground [in median
             edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
             a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
@@ -122,13 +135,25 @@ class SegmentParams:
         min_region_share: Regions of less area than this share of the plan area of the smallest
             rock of interest (a disc of diameter ``min_rock_b``) are fragments; 0 keeps every
             region [in units of ``pi / 4 min_rock_b^2``] [0; the authors' code dropped regions
-            under 1 % of all faces, a rule that caps a pile at about 100 rocks]. 0.25 is a disc
-            half as wide as the smallest rock: a rock is seen on more than its plan area, but a
-            partly hidden one on less. On bench/bench_scale.py's coarse pile (150 rocks of 11-22
-            edge lengths across) discs of 10 to 20 edge lengths across lost no rock, discs of 28
-            and 30 lost 32 and 45; with 10 to 20, precision stayed at 0.976 or more on every pile.
+            under 1 % of all faces, a rule that caps a pile at about 100 rocks]. 1: a rock of
+            interest shows at least its plan area unless it is mostly hidden. On reconstructed
+            piles the pieces of single rocks that survive the convex join are up to about that
+            size: with 0.25 the demo pile gave 24 rocks for 14 (12 false, every one on a true
+            rock, 13-170 cm2) and one of 12 rocks gave 30; 0.5 gave 15 and 17, 1.0 14 and 14
+            (2 and 3 false), 1.5 and 2 the same. On bench/bench_scale.py's coarse pile (150 rocks
+            of 11-22 edge lengths across) discs of 10 to 20 edge lengths across lost no rock
+            (1.0 of the default 20 edges: recall/precision 0.986/0.989 on coarse, 0.990/0.992 on
+            many, as with 0.25), discs of 28 and 30 lost 32 and 45.
         merge_fragments: Merge fragments into the neighbouring region they share the most edges
             with; when off, or when a fragment has no neighbour, it gets label 0 [off].
+        drop_facing_down: Give label 0 to a region that borders no other region (only ground)
+            and whose area-weighted mean normal points down [off]: the cameras look down on a
+            pile, so a rock standing alone on the ground shows its top; a lone region facing down
+            is an underside or overhang cut off from its rock by a gap in the mesh. On two
+            reconstructed piles such regions (2047 faces, median normal z -0.19, on a 12-rock
+            pile; 1224 faces, -0.29, on an 11-rock one) were reported as false rocks. Regions
+            facing down that border others are left alone: on bench/bench_scale.py's many pile,
+            merging those into a neighbour too gave 123 segments for 150 rocks (precision 0.81).
         merge_convex: After the fragment merge, join neighbouring regions whose union is convex
             across their shared border (see ``merge_convex_borders``) [off]: on a
             reconstructed mesh, noise stops the search inside single rocks.
@@ -150,7 +175,18 @@ class SegmentParams:
             4-5 mm edges) 7.5 mm, about 1.5 edge lengths, measured as well as 5 and 10 mm: 0.075
             keeps it there when ``min_rock_b`` comes from the mesh]. A crease is only seen at a
             scale wider than the rounding Poisson gave it, and the crevices between larger rocks
-            are wider.
+            are wider. Never under ``valley_min_edges`` edge lengths.
+        valley_min_edges: Floor of the valley radius [in median edge lengths]. On flat ground of
+            three reconstructed piles (3.8, 2.0, 2.35 mm edges) the depth under the smoothed
+            surface grows with the radius up to about 3 edge lengths (the noise of the dense
+            points is correlated over a few cells) and then levels off near 0.15 edge lengths,
+            while the valley depth threshold keeps growing with the radius: 11-17 % of the flat
+            faces read as valley at 1 edge length, 9-15 % at 1.5, 4-6 % at 3, 2-5 % at 4, where
+            the threshold clears the 95th percentile of the flat ground's depth. On the 12-rock
+            pile of 2.0 mm edges, 1.5 edge lengths (those of a 20-edge rock of interest) left 3
+            false rocks, 2.5 to 4 left 1; on the demo pile, 3 joined two touching rocks (D50
+            +8 %), 2.5 and 4 did not, and 4 found one rock more (recall 0.93 against 0.86). The
+            7.5 mm of the absolute rule were 2 and 3.7 edge lengths on those two piles.
         split_depth_ratio: Faces deeper than this under their surroundings at the scale
             ``split_radius_b`` cut a region; where they cut it into two or more parts of at
             least ``split_min_share`` of its area each, the parts become regions of their own (see
@@ -161,7 +197,9 @@ class SegmentParams:
             0.6 mm began to split single rocks.
         split_radius_b: Scale of the surroundings for ``split_depth_ratio`` [in units of
             ``min_rock_b``; 0.15 is the 15 mm (3 edge lengths) measured on reconstructed piles
-            when ``min_rock_b`` comes from the mesh].
+            when ``min_rock_b`` comes from the mesh]. Never under ``split_min_edges`` edge lengths.
+        split_min_edges: Floor of the split radius [in median edge lengths; twice
+            ``valley_min_edges``, as ``split_radius_b`` is twice ``valley_radius_b``].
         split_min_share: Smallest share of a region's area that a part needs to be split off
             (0.2 measured the same as 0.1).
 
@@ -176,15 +214,18 @@ class SegmentParams:
     min_rock_edges: Annotated[float, Range(RESOLVABLE_EDGES, 10_000.0)] = 20.0
     ground_tolerance_edges: Annotated[float, Range(0.0, 1000.0)] = 2.0
     ground_min_nz: Annotated[float, Range(0.0, 1.0)] = 0.0
-    min_region_share: Annotated[float, Range(0.0, 100.0)] = 0.25
+    min_region_share: Annotated[float, Range(0.0, 100.0)] = 1.0
     merge_fragments: bool = True
+    drop_facing_down: bool = True
     merge_convex: bool = True
     border_depth: Annotated[float, Range(0.0, 10.0)] = 0.12
     border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
     valley_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
     valley_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.075
+    valley_min_edges: Annotated[float, Range(0.0, 100.0)] = 4.0
     split_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
     split_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.15
+    split_min_edges: Annotated[float, Range(0.0, 100.0)] = 8.0
     split_min_share: Annotated[float, Range(0.0, 0.5)] = 0.1
 
     @classmethod
@@ -198,6 +239,7 @@ class SegmentParams:
             exclude_ground=False,
             min_region_share=0.0,
             merge_fragments=False,
+            drop_facing_down=False,
             merge_convex=False,
             valley_depth_ratio=0.0,
             split_depth_ratio=0.0,
@@ -222,12 +264,19 @@ class RockScale:
         edge: Median edge length of the mesh [m] (0 when every edge is degenerate).
         min_rock_b: Intermediate dimension b of the smallest rock of interest [m].
         source: Where ``min_rock_b`` came from: ``"parameter"``, ``"class"`` or ``"mesh"``.
+        requested: The smallest rock of interest asked for [m]; ``min_rock_b`` is larger when
+            the mesh does not resolve it (see ``SegmentParams.min_rock_edges``).
+        valley_radius: Scale of the valley faces (``SegmentParams.valley_radius_b``) [m].
+        split_radius: Scale of the valleys that split a region (``split_radius_b``) [m].
 
     """
 
     edge: float
     min_rock_b: float
     source: Literal['parameter', 'class', 'mesh']
+    requested: float
+    valley_radius: float
+    split_radius: float
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict for report.json."""
@@ -302,16 +351,27 @@ def rock_scale(
         spec: The class being checked, or None.
 
     Returns:
-        The scale; ``min_rock_b`` is never under ``RESOLVABLE_EDGES`` edge lengths.
+        The scale; ``min_rock_b`` is never under ``min_rock_edges`` edge lengths, the valley and
+        split radii never under ``valley_min_edges`` and ``split_min_edges``.
 
     """
-    floor = RESOLVABLE_EDGES * edge
-    if params.min_rock_b > 0:
-        return RockScale(edge, max(params.min_rock_b, floor), 'parameter')
+    floor = params.min_rock_edges * edge
+    source: Literal['parameter', 'class', 'mesh'] = 'mesh'
+    requested = floor
     from_class = class_min_rock_b(spec) if spec is not None else None
-    if from_class is not None:
-        return RockScale(edge, max(from_class, floor), 'class')
-    return RockScale(edge, params.min_rock_edges * edge, 'mesh')
+    if params.min_rock_b > 0:
+        source, requested = 'parameter', params.min_rock_b
+    elif from_class is not None:
+        source, requested = 'class', from_class
+    b = max(requested, floor)
+    return RockScale(
+        edge,
+        b,
+        source,
+        requested,
+        max(params.valley_radius_b * b, params.valley_min_edges * edge),
+        max(params.split_radius_b * b, params.split_min_edges * edge),
+    )
 
 
 def _smooth_normals(geom: FaceGeometry, adj: FaceAdjacency, rounds: int) -> npt.NDArray[np.float64]:
@@ -468,6 +528,26 @@ def merge_fragments(
         isolated[pair[:, 0]] = False
         target[isolated] = 0
         labels = target[labels].astype(np.int32)
+
+
+def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:
+    """Give label 0 to each region that faces down on the whole and borders no other region.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        lift: Per face, its area times the z component of its normal: a region faces down when
+            the sum over its faces is negative.
+
+    Returns:
+        The labels, such regions cleared.
+
+    """
+    down = np.bincount(labels, weights=lift) < 0
+    down[0] = False
+    a, b = labels[adj.src], labels[adj.dst]
+    down[a[(a != b) & (b > 0)]] = False
+    return np.where(down[labels], 0, labels).astype(np.int32)
 
 
 def _hull_points(points: F64) -> F64:
@@ -676,8 +756,7 @@ def segment_mesh(
         active &= ~ground
     # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's. A
     # mesh without a length (every edge degenerate) has no scale to look for valleys at.
-    valley_radius = p.valley_radius_b * scale.min_rock_b
-    split_radius = p.split_radius_b * scale.min_rock_b
+    valley_radius, split_radius = scale.valley_radius, scale.split_radius
     scales = ((valley_radius, p.valley_depth_ratio), (split_radius, p.split_depth_ratio))
     radii = [r for r, d in scales if d > 0 and edge > 0]
     depths = valley_depths(v, f, geom, radii, edge) if radii else []
@@ -718,6 +797,10 @@ def segment_mesh(
     if valley.any():
         labels = hand_back(labels, adj, valley)
         search = adj
+    if p.drop_facing_down:
+        # After the valley faces are handed back: a region that reaches a rock across a valley
+        # borders it and stays.
+        labels = drop_facing_down(labels, adj, geom.areas * geom.normals[:, 2])
     if p.merge_convex:
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
