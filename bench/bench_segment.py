@@ -75,7 +75,7 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
     d = SegmentParams()
     t_default = best_of(lambda: segment_mesh(v, f, d), repeat)
     scale = segment_mesh(v, f, d).scale
-    radii = [d.valley_radius_b * scale.min_rock_b, d.split_radius_b * scale.min_rock_b]
+    radii = [scale.valley_radius, scale.split_radius]
     t_valley = best_of(lambda: valley_depths(v, f, g, radii, scale.edge), repeat)
     print(f'default mode, one core, best of {repeat}: total {t_default:.2f} s '
           f'(median edge {scale.edge * 1000:.2f} mm, smallest rock {scale.min_rock_b * 1000:.0f} '

@@ -31,10 +31,12 @@ confidence interval straddles a limit); without a metric scale no class is check
 Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" keeps the
 ground and the valleys at the scale of the smallest rock of interest out of the search, uses
 t = 0.93, seeds from convex faces, merges fragments smaller than a share of the smallest rock of
-interest, hands the valley faces back to the rocks on either side and joins neighbouring regions
-whose union is convex across their shared border. Every length is in the mesh's median edge or in
-units of segment.min_rock_b (metres; by default half the checked class's smallest D15, else 20
-median edges), so a pile of gravel and one of riprap are cut by the same rules.
+interest (its full plan area), hands the valley faces back to the rocks on either side and joins
+neighbouring regions whose union is convex across their shared border. Every length is in the
+mesh's median edge or in units of segment.min_rock_b (metres; by default half the checked class's
+smallest D15, else 20 median edges, and never under 20 edges: the mesh cannot resolve less), with
+the valley and split radii never under 4 and 8 edges (the reconstruction's noise sits below), so a
+pile of gravel and one of riprap are cut by the same rules.
 
 Class tables: config/riprap_classes.yaml (NCHRP 568 classes I-X, by mass; the default) and
 config/fp14_riprap_classes.yaml (FHWA FP-14 classes 1-8, by count).
