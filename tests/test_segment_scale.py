@@ -156,8 +156,10 @@ def test_no_scale_goes_under_what_the_mesh_resolves() -> None:
 def test_a_class_finer_than_the_mesh_is_warned_about() -> None:
     v, f = _bumps(3, 32)
     spec = load_class_table()['classes']['I']
-    # Median edges of about 43 mm: class I's 47 mm is about one of them.
-    warned = analyse_mesh(v, f, spec=spec).report['warnings']
+    # Median edges of about 43 mm: class I's 47 mm is about one of them. The class sizes the
+    # segmentation only on a metric mesh.
+    metric = {'scale': {'method': 'target', 'metres_per_unit': 1.0, 'rel_uncertainty': 0.01}}
+    warned = analyse_mesh(v, f, spec=spec, mesh_info=metric).report['warnings']
     assert any('the mesh resolves' in w for w in warned)
     assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report['warnings'])
 
