@@ -40,29 +40,33 @@ __all__ = [
     'topic',
 ]
 
-Qos = Literal['sensor', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
+Qos = Literal['sensor', 'pose', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
 """QoS classes (the nodes map each onto an rclpy profile, the replay onto the offered QoS):
 
-- ``sensor``: best effort, keep last 50 (camera, camera info, odometry: a lost sample is not sent
-  again, so it matches any publisher; the depth lets a busy node catch up on a burst instead of
-  losing frames or odometry samples, which would change the keyframes and their poses);
+- ``sensor``: best effort, keep last 50 (camera, camera info: a lost sample is not sent again, so
+  it matches any publisher; the depth lets a busy node catch up on a burst instead of losing
+  frames, which would change the keyframes);
+- ``pose``: best effort, keep last 1000 (odometry: small samples at 30-100 Hz; a node busy with its
+  first keyframes lost the first seconds of a 30 Hz stream with 50, and those keyframes went out
+  without a pose);
 - ``reliable``: reliable, volatile, keep last 10 (triggers);
 - ``stream``: reliable, transient local, keep all (keyframes: every one must arrive, also at a
   reconstruction that matched the keyframe node after the first ones were sent, or restarted;
   the publisher holds at most ``selector.max_keyframes`` of them);
 - ``latched``: reliable, transient local, keep last 1 (results: a dashboard that joins late gets
   the last one);
-- ``tf`` and ``tf_static``: what tf2's own listener and broadcasters use (keep last 100, the static
-  one transient local).
+- ``tf`` and ``tf_static``: reliable, keep last 1000 (tf2's own use 100; a moving mast's transforms
+  must not be dropped while the node is busy), the static one transient local.
 """
 
 QOS_DEPTH: dict[Qos, int] = {
     'sensor': 50,
+    'pose': 1000,
     'reliable': 10,
     'stream': 0,
     'latched': 1,
-    'tf': 100,
-    'tf_static': 100,
+    'tf': 1000,
+    'tf_static': 1000,
 }
 """History depth of each class (0: keep all)."""
 
@@ -120,7 +124,7 @@ TABLE: tuple[Topic, ...] = (
     Topic(IMAGE, 'sensor_msgs/msg/Image', 'sensor', (), (_KF,)),
     Topic(IMAGE + COMPRESSED_SUFFIX, 'sensor_msgs/msg/CompressedImage', 'sensor', (), (_KF,)),
     Topic(CAMERA_INFO, 'sensor_msgs/msg/CameraInfo', 'sensor', (), (_KF,)),
-    Topic(ODOMETRY, 'nav_msgs/msg/Odometry', 'sensor', (), (_KF,)),
+    Topic(ODOMETRY, 'nav_msgs/msg/Odometry', 'pose', (), (_KF,)),
     # Where the camera sits on the cart (its offset from the odometry's base frame); the
     # reconstruction also places the stockpile frame in the odometry frame on /tf_static.
     Topic(TF, 'tf2_msgs/msg/TFMessage', 'tf', (), (_KF,)),

@@ -144,7 +144,7 @@ def test_input_topics_match_absolute_names_and_types() -> None:
         '/tf': '/tf',
         '/tf_static': '/tf_static',
     }
-    assert {e.qos for e in chosen.values()} == {'sensor', 'tf', 'tf_static', 'reliable'}
+    assert {e.qos for e in chosen.values()} == {'sensor', 'pose', 'tf', 'tf_static', 'reliable'}
 
 
 def test_input_topics_mapping() -> None:

@@ -168,9 +168,9 @@ def test_qos_profile_follows_the_table() -> None:
     assert trigger.reliability == ReliabilityPolicy.RELIABLE and trigger.depth == 10
     assert trigger.durability == DurabilityPolicy.VOLATILE
     tf = qos_profile(topics.topic(topics.TF).qos)
-    assert tf.depth == 100 and tf.durability == DurabilityPolicy.VOLATILE
+    assert tf.depth == 1000 and tf.durability == DurabilityPolicy.VOLATILE
     static = qos_profile(topics.topic(topics.TF_STATIC).qos)
-    assert static.depth == 100 and static.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert static.depth == 1000 and static.durability == DurabilityPolicy.TRANSIENT_LOCAL
     assert static.reliability == ReliabilityPolicy.RELIABLE
     stream = qos_profile(topics.topic(topics.KEYFRAMES).qos)
     assert stream.history == HistoryPolicy.KEEP_ALL

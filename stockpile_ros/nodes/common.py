@@ -45,7 +45,8 @@ def qos_profile(qos: topics.Qos) -> QoSProfile:
     """Return the rclpy profile of a QoS class of the topic table (see :data:`topics.Qos`)."""
     depth = topics.QOS_DEPTH[qos]
     history = HistoryPolicy.KEEP_ALL if depth == 0 else HistoryPolicy.KEEP_LAST
-    reliability = ReliabilityPolicy.BEST_EFFORT if qos == 'sensor' else ReliabilityPolicy.RELIABLE
+    best_effort = qos in ('sensor', 'pose')
+    reliability = ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE
     durable = qos in ('stream', 'latched', 'tf_static')
     durability = DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE
     return QoSProfile(history=history, depth=max(depth, 1), reliability=reliability,
