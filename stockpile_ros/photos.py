@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,9 @@ from .errors import CaptureError, StockpileError
 from .recon.pipeline import WorkFolder, run_keyframes
 from .recon.sources import source_kind
 from .runner import Outcome, run_reconstruction, run_segmentation
-from .settings import Settings, write_effective
+from .runs import claim
+from .segment.provenance import Provenance
+from .settings import Settings, defaults, write_effective
 
 __all__ = ['SourceSummary', 'replay_source', 'summary_lines']
 
@@ -72,20 +75,32 @@ def _failed(summary: SourceSummary, outcome: Outcome) -> SourceSummary:
     return summary
 
 
-def replay_source(source: str | Path, out: str | Path, settings: Settings) -> SourceSummary:
+def replay_source(
+    source: str | Path,
+    out: str | Path,
+    settings: Settings,
+    *,
+    resume: bool = False,
+    fresh: bool = False,
+) -> SourceSummary:
     """Measure the rocks of a photo folder or a video into ``out``: ``work/`` and ``result/``.
+
+    ``out`` is claimed as a bag replay claims it (:func:`stockpile_ros.runs.claim`): another
+    source's or parameter set's run is refused, never added to.
 
     Args:
         source: Folder of photos (JPEG, PNG, HEIC, ...) or a video file.
-        out: Output folder (created; must not hold a previous run's keyframes).
+        out: Output folder (created).
         settings: Parameters; ``work_dir`` is replaced by ``out/work``.
+        resume: Continue the run of this source and parameters that ``out`` holds.
+        fresh: Clear ``out`` and start over.
 
     Returns:
         The summary; ``ok`` is False when no result could be produced (reasons in ``problems``).
 
     Raises:
-        StockpileError: ``source`` is a bag or neither photos nor a video, or ``out`` holds a
-            previous run.
+        StockpileError: ``source`` is a bag or neither photos nor a video, or ``out`` cannot
+            take the run.
 
     """
     path = Path(source)
@@ -94,12 +109,19 @@ def replay_source(source: str | Path, out: str | Path, settings: Settings) -> So
         raise StockpileError(f'{path}: a bag; it is replayed through the components')
     out_dir = Path(out)
     settings = dataclasses.replace(settings, work_dir=out_dir / 'work')
+    with claim(out_dir, path, settings.values, resume=resume, fresh=fresh) as run:
+        summary = _measure(path, kind, out_dir, settings)
+        if not summary.ok:
+            run.state = 'failed'
+    return summary
+
+
+def _measure(path: Path, kind: str, out_dir: Path, settings: Settings) -> SourceSummary:
     work = WorkFolder(settings.work_dir)
-    if work.keyframes.exists():
-        # Resuming would add this source's keyframes to another's.
-        raise StockpileError(f'{work.keyframes} exists already; choose another --out or remove it')
-    write_effective(settings, settings.work_dir)
     summary = SourceSummary(path, kind, work_dir=work.root, result_dir=out_dir / 'result')
+    # A rerun writes the result anew: a failed one leaves none of an earlier run.
+    shutil.rmtree(summary.result_dir, ignore_errors=True)
+    write_effective(settings, settings.work_dir)
     try:
         counts = run_keyframes(path, work, settings.recon)
     except CaptureError as exc:
@@ -110,7 +132,8 @@ def replay_source(source: str | Path, out: str | Path, settings: Settings) -> So
     if not recon.ok:
         return _failed(summary, recon)
     summary.mesh = recon.results['mesh']
-    segmentation = run_segmentation(settings, work.mesh, summary.result_dir)
+    made_from = Provenance.for_input(path, settings.values, defaults())
+    segmentation = run_segmentation(settings, work.mesh, summary.result_dir, made_from)
     if not segmentation.ok or segmentation.analysis is None:
         return _failed(summary, segmentation)
     summary.outcome = segmentation

@@ -158,3 +158,6 @@ def test_replay_of_photos_without_a_target_says_model_units(
     assert ' m\n' not in printed and ' m,' not in printed
     mesh = json.loads((out / 'work' / 'mesh' / 'mesh.json').read_text())
     assert mesh['units'] == 'model' and mesh['scale']['method'] == 'none'
+    # The folder now belongs to these photos: a second run into it is asked for, not appended.
+    assert main(['replay', str(folder), '--out', str(out), '--set', 'dense.work_width=320']) == 2
+    assert 'holds a run of this input' in capsys.readouterr().err

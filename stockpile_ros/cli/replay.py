@@ -82,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     if source_kind(args.source) != 'bag':
         from ..photos import replay_source, summary_lines
 
-        photos = replay_source(args.source, args.out, settings)
+        photos = replay_source(args.source, args.out, settings, resume=args.resume,
+                               fresh=args.fresh)  # fmt: skip
         out, err = summary_lines(photos)
         for line in err:
             print(line, file=sys.stderr)
