@@ -61,6 +61,7 @@ def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
         assert not node.set_parameters([Parameter('work_dir', value='/x')])[0].successful
         # A value accepted at run time takes effect from the next frame on.
         assert node.set_parameters([Parameter('selector.min_parallax', value=0.5)])[0].successful
+        assert node.inbox.drain(5)
         assert node.component.collector.selector.options.min_parallax == 0.5
     finally:
         node.destroy_node()
