@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from stockpile_ros import messages as m  # noqa: E402
 from stockpile_ros import topics  # noqa: E402
-from stockpile_ros.nodes.common import RclpyFactory, qos_profile  # noqa: E402
+from stockpile_ros.nodes.common import Inbox, RclpyFactory, qos_profile  # noqa: E402
 from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
@@ -47,6 +47,37 @@ def test_factory_builds_messages_rclpy_accepts() -> None:
     assert cloud.width == 1 and len(cloud.data) == cloud.point_step
     diag = diagnostic_array(f, 5, [{'name': 'a', 'level': 'WARN', 'message': 'm'}])
     assert diag.status[0].level == diag.status[0].WARN
+
+
+class _Log:
+    def __init__(self) -> None:
+        self.errors: list[str] = []
+
+    def error(self, text: str) -> None:
+        self.errors.append(text)
+
+
+def test_inbox_keeps_arrival_order_drops_oldest_frames_and_survives_errors() -> None:
+    log = _Log()
+    inbox = Inbox(max_droppable=2, logger=log)
+    done: list[str] = []
+    gate = threading.Event()
+    inbox.put(lambda: gate.wait(5))  # holds the thread while the rest queues up
+    for name in ['f1', 'odom1', 'f2', 'f3', 'odom2', 'f4']:
+        inbox.put(lambda name=name: done.append(name), droppable=name.startswith('f'))
+
+    def fail() -> None:
+        raise ValueError('bad message')
+
+    inbox.put(fail)
+    inbox.put(lambda: done.append('after'))
+    gate.set()
+    assert inbox.drain(5)
+    # Frames beyond two waiting went oldest first; the rest kept their order.
+    assert done == ['odom1', 'f3', 'odom2', 'f4', 'after']
+    assert inbox.dropped == 2
+    assert len(log.errors) == 1 and 'bad message' in log.errors[0]
+    inbox.close()
 
 
 def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
