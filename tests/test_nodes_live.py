@@ -65,7 +65,7 @@ def _same_keyframes(live: Path, replayed: Path) -> None:
     held = [KeyframeStore(folder / 'keyframes').records for folder in (live, replayed)]
     assert [r.index for r in held[0]] == [r.index for r in held[1]]
     for a, b in zip(*held, strict=True):
-        assert a.odometry == b.odometry and a.odometry and 'camera_position' in a.odometry
+        assert a.odometry == b.odometry and a.odometry and a.odometry.camera_position
         assert a.camera is not None and b.camera is not None
         assert np.array_equal(a.camera.k, b.camera.k)
 

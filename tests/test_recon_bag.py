@@ -48,8 +48,8 @@ def test_bag_keyframes_carry_camera_and_odometry_and_resume(tmp_path: Path) -> N
     assert [r.index for r in records] == list(range(8))
     for record in records:
         assert record.camera is not None and record.camera.width == 96
-        assert record.odometry is not None and record.odometry['frame_id'] == 'odom'
+        assert record.odometry is not None and record.odometry.frame_id == 'odom'
         # The optical centre from odometry and /tf_static is the true camera position.
         np.testing.assert_allclose(
-            record.odometry['camera_position'], true_centres[record.stamp_ns], atol=1e-3
+            record.odometry.camera_position, true_centres[record.stamp_ns], atol=1e-3
         )

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
 from stockpile_ros import topics
+from stockpile_ros.artefacts import OdometryEntry
 from stockpile_ros.camera import Frame
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 from stockpile_ros.messages import RosbagsFactory
@@ -109,8 +110,7 @@ def test_reconstruction_outputs_move_the_cloud_and_decimate(tmp_path: Path) -> N
         # The camera sits 0.5 m above a base that the fit must not take for it.
         camera = (turn.apply(position) + shift).tolist()
         base = [camera[0], camera[1], camera[2] - 0.5]
-        odometry = {'position': base, 'frame_id': 'odom', 'camera_position': camera,
-                    'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]}  # fmt: skip
+        odometry = OdometryEntry(base, [0.0, 0.0, 0.0, 1.0], camera_position=camera)
         frame = Frame(i, np.zeros((4, 4, 3), np.uint8), 'camera_optical_frame', index=i)
         record = store.add(frame, odometry=odometry)
         keyframes.append({'stamp_ns': i, 'file': record.file, 'position': position,

@@ -303,12 +303,12 @@ def _odometry_pairs(
     rows = sorted(
         (r.stamp_ns, r.file, r.odometry)
         for r in store.records
-        if r.odometry is not None and 'camera_position' in r.odometry and r.file in model.views
+        if r.odometry and r.odometry.camera_position is not None and r.file in model.views
     )
     names = [name for _, name, _ in rows]
     stamps = np.array([stamp for stamp, _, _ in rows], dtype=np.int64)
     centres = np.array([model.views[name].center for name in names]).reshape(-1, 3)
-    positions = np.array([odo['camera_position'] for _, _, odo in rows], dtype=np.float64).reshape(
+    positions = np.array([odo.camera_position for _, _, odo in rows], dtype=np.float64).reshape(
         -1, 3
     )
     return names, stamps, centres, positions
@@ -399,7 +399,7 @@ def estimate_scale(
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
         odometry_only = [r.odometry for r in store.records if r.odometry is not None]
-        unplaced = sum(1 for odo in odometry_only if 'camera_position' not in odo)
+        unplaced = sum(1 for odo in odometry_only if odo.camera_position is None)
         if unplaced:
             # Odometry without a /tf link from its base to the camera: no camera centre is known.
             details['odometry'] = {'keyframes_without_camera_pose': unplaced}
@@ -466,11 +466,11 @@ def odom_from_stockpile(work: WorkFolder) -> tuple[str, Similarity] | None:
     src, dst, frame = [], [], ''
     for record in KeyframeStore(work.keyframes).records:
         odo = record.odometry
-        if odo is None or 'camera_position' not in odo or record.file not in in_stockpile:
+        if odo is None or odo.camera_position is None or record.file not in in_stockpile:
             continue
         src.append(in_stockpile[record.file])
-        dst.append(odo['camera_position'])
-        frame = str(odo.get('frame_id', 'odom'))
+        dst.append(odo.camera_position)
+        frame = odo.frame_id
     if len(src) < 3:
         return None
     sim = umeyama(np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64))

@@ -22,10 +22,10 @@ import numpy.typing as npt
 import pycolmap
 from PIL import Image
 
+from ..artefacts import KeyframeRecord
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..ranges import Range
-from .keyframes import KeyframeRecord
 
 __all__ = ['SfmOptions', 'SparseModel', 'View', 'load_sparse', 'run_sfm']
 
