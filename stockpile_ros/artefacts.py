@@ -41,18 +41,21 @@ import numpy as np
 
 from .camera import CameraModel
 from .errors import StockpileError
+from .geometry import Similarity
 
 __all__ = [
     'ArtefactError',
     'DenseSummary',
     'KeyframePose',
     'KeyframeRecord',
+    'KeyframeSummary',
     'MeshInfo',
     'ModelImages',
     'OdometryEntry',
     'ScaleRecord',
     'SimilarityRecord',
     'SparseSummary',
+    'StageResult',
     'from_json',
     'load',
     'save',
@@ -128,6 +131,26 @@ class KeyframeRecord:
             raise ArtefactError('a keyframes.jsonl line is not an object')
         _check_schema(cls.SCHEMA, str(data.pop('schema', cls.SCHEMA)), 'keyframes.jsonl')
         return from_json(cls, data)
+
+
+@dataclass
+class KeyframeSummary:
+    """What the keyframe stage did (printed and published; the keyframes are on disk).
+
+    Attributes:
+        frames: Frames seen.
+        keyframes: Keyframes held in total.
+        new: Keyframes kept by this run (a resumed run keeps the earlier ones).
+        decisions: The selector's decisions by reason.
+        problems: Messages of the source that could not be read, one line each.
+
+    """
+
+    frames: int
+    keyframes: int
+    new: int
+    decisions: dict[str, int] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -240,7 +263,7 @@ class ScaleRecord:
     method: ScaleMethod = 'none'
     metres_per_unit: float = 1.0
     rel_uncertainty: float | None = None
-    parts: dict[str, float] = field(default_factory=dict)
+    parts: dict[str, float | None] = field(default_factory=dict)
     note: str = ''
 
     @property
@@ -263,6 +286,11 @@ class SimilarityRecord:
     scale: float = 1.0
     rotation: list[float] = field(default_factory=lambda: [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0])
     translation: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    def similarity(self) -> Similarity:
+        """Return the transform, to apply."""
+        rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
+        return Similarity(self.scale, rotation, np.asarray(self.translation, dtype=np.float64))
 
 
 @dataclass
@@ -321,6 +349,10 @@ class MeshInfo:
             raise ArtefactError(
                 f'mesh.json: units {self.units!r} with scale method {self.scale.method!r}'
             )
+
+
+StageResult = KeyframeSummary | SparseSummary | DenseSummary | MeshInfo
+"""What a reconstruction stage returns (keyframes, sfm, dense, mesh)."""
 
 
 def to_json(record: Any) -> Any:

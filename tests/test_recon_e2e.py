@@ -38,7 +38,7 @@ def test_synthetic_views_to_metric_mesh(tmp_path: Path) -> None:
         poisson=PoissonOptions(depth=7),
     )
     results = reconstruct(None, tmp_path, options, stage='sfm')
-    assert results['sfm']['registered'] == 10
+    assert results['sfm'].registered == 10
     for stage in ('dense', 'mesh'):
         reconstruct(None, tmp_path, options, stage=stage)
     info = json.loads((work.mesh / 'mesh.json').read_text())
