@@ -13,17 +13,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import topics
 from .artefacts import KeyframeSummary
 from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
 from .components import KeyframeComponent, ReconstructionComponent
 from .errors import CaptureError, StockpileError
-from .messages import RosbagsFactory
-from .msgs import typestore
 from .progress import progress
-from .publish import Publication
 from .recon.pipeline import ReconOptions, WorkFolder, run_keyframes
 from .recon.sources import source_kind
+from .ros import topics
+from .ros.messages import RosbagsFactory
+from .ros.publications import Publication
+from .ros.typestore import typestore
 from .settings import Settings
 
 __all__ = ['BagInputs', 'bag_inputs', 'collect_keyframes', 'drive', 'keyframes_from_bag']

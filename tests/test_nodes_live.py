@@ -22,7 +22,6 @@ pytest.importorskip('stockpile_msgs', reason='the stockpile_msgs interface packa
 from live_graph import OUTPUTS, Recorder, play, rig, spin, trigger, wait  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from stockpile_ros import topics  # noqa: E402
 from stockpile_ros.bagio.reader import BagReader  # noqa: E402
 from stockpile_ros.cli import main as cli  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
@@ -30,6 +29,7 @@ from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: 
 from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
 from stockpile_ros.recon.keyframes import KeyframeStore  # noqa: E402
 from stockpile_ros.replay import replay  # noqa: E402
+from stockpile_ros.ros import topics  # noqa: E402
 from stockpile_ros.settings import build_settings  # noqa: E402
 
 pytestmark = pytest.mark.slow

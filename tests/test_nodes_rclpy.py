@@ -20,14 +20,14 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from stockpile_ros import messages as m  # noqa: E402
-from stockpile_ros import topics  # noqa: E402
 from stockpile_ros.nodes.common import Inbox, RclpyFactory, qos_profile  # noqa: E402
 from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
 from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
-from stockpile_ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
+from stockpile_ros.ros import messages as m  # noqa: E402
+from stockpile_ros.ros import topics  # noqa: E402
+from stockpile_ros.ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
 from stockpile_ros.settings import settings_for  # noqa: E402
 
 

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stockpile_ros import messages as m
 from stockpile_ros.artefacts import OdometryEntry
 from stockpile_ros.camera import Frame
-from stockpile_ros.msgs import typestore
 from stockpile_ros.recon.collector import KeyframeCollector, OdometryBuffer, heading_coverage
 from stockpile_ros.recon.keyframes import SelectorOptions
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros.typestore import typestore
 
 
 def test_heading_coverage() -> None:

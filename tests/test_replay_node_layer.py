@@ -14,7 +14,7 @@ ROS = {'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'std_msgs', 'std_srvs', '
        'stockpile_msgs'}  # fmt: skip
 # The core components a node may call; everything else (stages, numpy work) stays behind them.
 # playback: the bag player's loops (ROS-free); errors: the exception classes a main() reports.
-CORE = {'topics', 'publish', 'components', 'settings', 'errors', 'playback', 'bagio.reader'}
+CORE = {'ros', 'ros.publications', 'components', 'settings', 'errors', 'playback', 'bagio.reader'}
 HEAVY = {'numpy', 'scipy', 'open3d', 'pycolmap', 'cv2', 'rosbags', 'matplotlib'}
 
 

@@ -11,20 +11,20 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
-from stockpile_ros import topics
 from stockpile_ros.artefacts import DenseSummary, MeshInfo, OdometryEntry, SparseSummary
 from stockpile_ros.camera import Frame
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
-from stockpile_ros.messages import RosbagsFactory
-from stockpile_ros.msgs import typestore
-from stockpile_ros.publish import (
+from stockpile_ros.recon.collector import CollectorState
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.ros import topics
+from stockpile_ros.ros.messages import RosbagsFactory
+from stockpile_ros.ros.publications import (
     keyframe_status,
     reconstruction_diagnostics,
     reconstruction_outputs,
     segmentation_outputs,
 )
-from stockpile_ros.recon.collector import CollectorState
-from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.runner import Outcome
 from stockpile_ros.segment.pipeline import analyse_mesh
 

@@ -9,13 +9,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
-from stockpile_ros import messages as m
-from stockpile_ros import topics
 from stockpile_ros.artefacts import MeshInfo, from_json
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
-from stockpile_ros.msgs import typestore
-from stockpile_ros.publish import capture_warnings
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import topics
+from stockpile_ros.ros.publications import capture_warnings
+from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.segment.measure import RockMeasure, visibility_warnings
 
 ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',

@@ -18,11 +18,11 @@ import numpy as np
 import numpy.typing as npt
 
 from ..artefacts import KeyframeRecord, OdometryEntry
-from ..bagio.images import decode_image
-from ..bagio.reader import camera_model_from_msg, message_stamp_ns
 from ..camera import CameraModel, Frame
 from ..meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
-from ..messages import MessageFactory, camera_info, header, pose
+from ..ros.convert import camera_model_from_msg, message_stamp_ns
+from ..ros.images import decode_image
+from ..ros.messages import MessageFactory, camera_info, header, pose
 
 __all__ = [
     'ReceivedKeyframe',

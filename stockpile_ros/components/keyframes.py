@@ -17,16 +17,16 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from .. import topics
-from ..bagio.images import ImageError, decode_image
-from ..bagio.reader import CameraInfoError, camera_model_from_msg, message_stamp_ns
 from ..camera import CameraModel, Frame
-from ..messages import MessageFactory
-from ..publish import Publication, diagnostics, keyframe_status
 from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.keyframes import Decision
 from ..recon.pipeline import WorkFolder
 from ..recon.transforms import valid_pose
+from ..ros import topics
+from ..ros.convert import CameraInfoError, camera_model_from_msg, message_stamp_ns
+from ..ros.images import ImageError, decode_image
+from ..ros.messages import MessageFactory
+from ..ros.publications import Publication, diagnostics, keyframe_status
 from ..settings import Settings
 from .handoff import keyframe_image, keyframe_message
 

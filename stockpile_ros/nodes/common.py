@@ -24,9 +24,9 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import try_shutdown
 
-from .. import topics
 from ..errors import StockpileError
-from ..publish import Publication
+from ..ros import topics
+from ..ros.publications import Publication
 from ..settings import Setting, Settings, build_settings, settings_for
 from .interfaces import get_message
 
@@ -155,7 +155,7 @@ class Inbox:
 
 
 class RclpyFactory:
-    """Message factory over the rclpy message packages (see stockpile_ros.messages)."""
+    """Message factory over the rclpy message packages (see stockpile_ros.ros.messages)."""
 
     def cls(self, msgtype: str) -> Any:
         """Return the rclpy class of ``pkg/msg/Name``."""

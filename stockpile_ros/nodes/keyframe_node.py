@@ -8,9 +8,9 @@ from typing import Any
 
 from rclpy.node import Node
 
-from .. import topics
 from ..components import WAIT_NS, KeyframeComponent
-from ..publish import Publication
+from ..ros import topics
+from ..ros.publications import Publication
 from .common import (
     Inbox,
     Publishers,

@@ -32,12 +32,12 @@ from ..artefacts import (
     save,
     to_json,
 )
-from ..bagio.images import DEFAULT_MAX_PIXELS
 from ..errors import CaptureError, StockpileError
 from ..geometry import Similarity, umeyama
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
 from ..ranges import Range
+from ..ros.images import DEFAULT_MAX_PIXELS
 from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
 from .exif import read_intrinsics

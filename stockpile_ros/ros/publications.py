@@ -1,8 +1,8 @@
 """From collector, run outcomes and results to the (topic, message) pairs the node set publishes.
 
-Written once over a :class:`~stockpile_ros.messages.MessageFactory`: the replay serialises the
+Written once over a :class:`~stockpile_ros.ros.messages.MessageFactory`: the replay serialises the
 messages with rosbags, the nodes publish them with rclpy. Topic names are the relative names of
-:mod:`stockpile_ros.topics` (the replay makes them absolute).
+:mod:`stockpile_ros.ros.topics` (the replay makes them absolute).
 """
 
 from __future__ import annotations
@@ -15,8 +15,12 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from ..artefacts import DenseSummary, MeshInfo, SparseSummary, load
+from ..recon.collector import CollectorState
+from ..recon.pipeline import WorkFolder, odom_from_stockpile
+from ..runner import Outcome
+from ..segment.pipeline import Analysis
 from . import topics
-from .artefacts import DenseSummary, MeshInfo, SparseSummary, load
 from .messages import MessageFactory, tf_message, transform_stamped
 from .outputs import (
     diagnostic_array,
@@ -28,10 +32,6 @@ from .outputs import (
     rock_array,
     rock_color,
 )
-from .recon.collector import CollectorState
-from .recon.pipeline import WorkFolder, odom_from_stockpile
-from .runner import Outcome
-from .segment.pipeline import Analysis
 
 __all__ = [
     'DIAGNOSTIC_PREFIX',
@@ -191,7 +191,7 @@ def reconstruction_outputs(
     """
     import open3d as o3d
 
-    from .meshio import read_labelled_mesh
+    from ..meshio import read_labelled_mesh
 
     work = Path(work_dir)
     to_stockpile = load(MeshInfo, work / 'mesh' / 'mesh.json').model_to_stockpile.similarity()
