@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -14,10 +15,12 @@ from stockpile_ros.artefacts import (
     DenseSummary,
     KeyframePose,
     KeyframeRecord,
+    KeyframeSummary,
     MeshInfo,
     ModelImages,
     OdometryEntry,
     ScaleRecord,
+    SimilarityRecord,
     SparseSummary,
     from_json,
     load,
@@ -78,3 +81,13 @@ def test_a_bad_field_is_refused_with_where_it_is(change: dict[str, object], why:
     data = {**to_json(_mesh_info()), **change}
     with pytest.raises(ArtefactError, match=why):
         from_json(MeshInfo, data)
+
+
+def test_docs_name_every_field() -> None:
+    doc = (Path(__file__).resolve().parent.parent / 'docs' / 'formats.md').read_text()
+    records = (KeyframeRecord, OdometryEntry, KeyframeSummary, SparseSummary, ModelImages,
+               DenseSummary, MeshInfo, ScaleRecord, SimilarityRecord, KeyframePose)  # fmt: skip
+    for record in records:
+        missing = [f.name for f in dataclasses.fields(record) if f.name != 'extra']
+        missing = [name for name in missing if f'`{name}`' not in doc and f'"{name}"' not in doc]
+        assert not missing, f'{record.__name__}: docs/formats.md does not name {missing}'
