@@ -29,10 +29,10 @@ from stockpile_ros.errors import CaptureError
 from stockpile_ros.recon.keyframes import KeyframeStore
 from stockpile_ros.recon.pipeline import WorkFolder, reconstruct
 from stockpile_ros.settings import build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 AIM_HEIGHT = 0.1
 

@@ -9,10 +9,10 @@ from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.recon.keyframes import KeyframeStore
 from stockpile_ros.recon.pipeline import WorkFolder
 from stockpile_ros.settings import build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig, parse_gradation
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 TINY = SimulationConfig(
     seed=5,

@@ -72,6 +72,16 @@ def test_node_modules_hold_no_numeric_work() -> None:
                                   'types.items()'}, f'{path.name}: loop over {target}'  # fmt: skip
 
 
+def test_the_measuring_path_never_imports_the_tools() -> None:
+    # The simulator, the evaluation and the test scenes are tools; only their commands use them.
+    commands = {PACKAGE / 'cli' / 'simulate.py', PACKAGE / 'cli' / 'evaluate.py'}
+    for path in PACKAGE.rglob('*.py'):
+        if 'tools' in path.relative_to(PACKAGE).parts or path in commands:
+            continue
+        for level, name in _imports(ast.parse(path.read_text())):
+            assert 'tools' not in name.split('.'), f'{path}: imports {"." * level}{name}'
+
+
 def test_nothing_outside_the_node_layer_imports_ros() -> None:
     for path in PACKAGE.rglob('*.py'):
         if path.parent.name == 'nodes':

@@ -1,8 +1,8 @@
 """A stockpile simulator: rendered camera-cart bags of rock piles with exact ground truth.
 
-:func:`~stockpile_ros.sim.record.simulate` is the entry point (``stockpile simulate`` calls it); the
-modules are usable alone: :mod:`.rocks` (rock meshes), :mod:`.pile` (gradation and stacking),
-:mod:`.texture`, :mod:`.camera_path`, :mod:`.render` (CPU ray casting), :mod:`.truth`,
+:func:`~stockpile_ros.tools.sim.record.simulate` is the entry point (``stockpile simulate`` calls
+it); the modules are usable alone: :mod:`.rocks` (rock meshes), :mod:`.pile` (gradation and
+stacking), :mod:`.texture`, :mod:`.camera_path`, :mod:`.render` (CPU ray casting), :mod:`.truth`,
 :mod:`.record`.
 """
 
