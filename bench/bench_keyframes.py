@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.errors import CaptureError
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder, reconstruct
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.settings import build_settings
 from stockpile_ros.tools.sim.camera_path import PathConfig
 from stockpile_ros.tools.sim.pile import PileConfig

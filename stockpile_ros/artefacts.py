@@ -56,6 +56,7 @@ __all__ = [
     'SimilarityRecord',
     'SparseSummary',
     'StageResult',
+    'WorkFolder',
     'from_json',
     'load',
     'save',
@@ -68,6 +69,48 @@ ScaleMethod = Literal['target', 'odometry', 'target+odometry', 'given', 'input u
 
 class ArtefactError(StockpileError):
     """A stage's file that cannot be read as its type (missing key, wrong type, newer schema)."""
+
+
+@dataclass(frozen=True)
+class WorkFolder:
+    """Paths of the work folder."""
+
+    root: Path
+
+    @property
+    def capture(self) -> Path:
+        """The keyframe node's own copy of what it selected (PNGs, ``keyframes.jsonl``)."""
+        return self.root / 'capture'
+
+    @property
+    def keyframes(self) -> Path:
+        """PNG keyframes and ``keyframes.jsonl``: what the reconstruction runs on."""
+        return self.root / 'keyframes'
+
+    @property
+    def photos(self) -> Path:
+        """``photos.json``: each photo of a photo folder, its keyframe and EXIF intrinsics."""
+        return self.root / 'photos.json'
+
+    @property
+    def sparse(self) -> Path:
+        """COLMAP model and ``sparse.json``."""
+        return self.root / 'sparse'
+
+    @property
+    def dense(self) -> Path:
+        """``dense.ply`` and ``dense.json``."""
+        return self.root / 'dense'
+
+    @property
+    def mesh(self) -> Path:
+        """``mesh.ply`` and ``mesh.json``."""
+        return self.root / 'mesh'
+
+    @property
+    def surface(self) -> Path:
+        """The segmentation's copy of the surface it received (``mesh.ply``, ``mesh.json``)."""
+        return self.root / 'surface'
 
 
 @dataclass

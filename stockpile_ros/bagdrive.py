@@ -13,13 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .artefacts import KeyframeSummary
+from .artefacts import KeyframeSummary, WorkFolder
 from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
 from .components import KeyframeComponent, ReconstructionComponent
 from .errors import CaptureError, StockpileError
 from .progress import progress
-from .recon.pipeline import ReconOptions, WorkFolder, run_keyframes
+from .recon.options import ReconOptions
 from .recon.sources import source_kind
+from .recon.stages import run_keyframes
 from .ros import topics
 from .ros.messages import RosbagsFactory
 from .ros.publications import Publication

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .artefacts import MeshInfo, SparseSummary, load
+from .artefacts import MeshInfo, SparseSummary, WorkFolder, load
 from .components import result_lines
 from .errors import CaptureError, StockpileError
-from .recon.pipeline import WorkFolder, run_keyframes
 from .recon.sources import source_kind
+from .recon.stages import run_keyframes
 from .runner import Outcome, run_reconstruction, run_segmentation
 from .runs import claim
 from .segment.provenance import Provenance

@@ -12,11 +12,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .artefacts import DenseSummary, MeshInfo, SparseSummary, load
+from .artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
 from .errors import CaptureError, StockpileError
 from .meshcheck import read_mesh
 from .recon.keyframes import KeyframeStore
-from .recon.pipeline import WorkFolder, reconstruct
+from .recon.pipeline import reconstruct
 from .segment.pipeline import Analysis, analyse_mesh
 from .segment.provenance import Provenance
 from .segment.qa import report_options

@@ -12,20 +12,16 @@ import pytest
 from PIL import Image
 from recon_synth import look_at, marker_decal, render, scene_mesh
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.cli import main
 from stockpile_ros.geometry import umeyama
 from stockpile_ros.recon.exif import read_intrinsics, sensor_width
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import (
-    WorkFolder,
-    estimate_scale,
-    photo_names,
-    run_keyframes,
-    run_sfm_stage,
-)
 from stockpile_ros.recon.scale import ScaleEstimate
+from stockpile_ros.recon.scaling import estimate_scale
 from stockpile_ros.recon.sfm import load_sparse
+from stockpile_ros.recon.stages import photo_names, run_keyframes, run_sfm_stage
 from stockpile_ros.settings import build_settings
 
 W, H = 640, 480

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder
 from stockpile_ros.settings import build_settings
 from stockpile_ros.tools.sim.camera_path import PathConfig
 from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation

@@ -7,13 +7,14 @@ import numpy as np
 import open3d as o3d
 from recon_synth import look_at, orbit, render, scene_mesh
 
-from stockpile_ros.artefacts import OdometryEntry
+from stockpile_ros.artefacts import OdometryEntry, WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.geometry import umeyama
 from stockpile_ros.meshio import read_labelled_mesh
 from stockpile_ros.recon.dense import DenseOptions
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.recon.sfm import SfmOptions
 from stockpile_ros.recon.surface import PoissonOptions
 

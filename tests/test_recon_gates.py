@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 from recon_synth import look_at, orbit, render, scene_mesh
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.recon.gates import GateOptions, angular_span, registration_gate
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder
 from stockpile_ros.runner import run_reconstruction
 from stockpile_ros.settings import build_settings
 

@@ -11,9 +11,11 @@ import open3d as o3d
 import pytest
 from recon_synth import look_at, render, scene_mesh
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.recon.keyframes import KeyframeSelector, KeyframeStore, SelectorOptions
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, run_keyframes
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.stages import run_keyframes
 
 
 def _texture(seed: int = 0, size: int = 1600) -> np.ndarray:

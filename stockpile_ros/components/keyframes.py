@@ -17,10 +17,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..artefacts import WorkFolder
 from ..camera import CameraModel, Frame
 from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.keyframes import Decision
-from ..recon.pipeline import WorkFolder
 from ..recon.transforms import valid_pose
 from ..ros import topics
 from ..ros.convert import CameraInfoError, camera_model_from_msg, message_stamp_ns

@@ -14,9 +14,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ..artefacts import WorkFolder
 from ..recon.collector import CollectorState
 from ..recon.keyframes import KeyframeStore
-from ..recon.pipeline import WorkFolder
 from ..ros import topics
 from ..ros.convert import CameraInfoError
 from ..ros.images import ImageError

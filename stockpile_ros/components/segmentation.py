@@ -12,8 +12,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..artefacts import WorkFolder
 from ..recon.collector import CollectorState
-from ..recon.pipeline import WorkFolder
 from ..ros.messages import MessageFactory
 from ..ros.publications import (
     Publication,

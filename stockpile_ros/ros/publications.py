@@ -15,9 +15,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from ..artefacts import DenseSummary, MeshInfo, SparseSummary, load
+from ..artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
 from ..recon.collector import CollectorState
-from ..recon.pipeline import WorkFolder, odom_from_stockpile
+from ..recon.scaling import odom_from_stockpile
 from ..runner import Outcome
 from ..segment.pipeline import Analysis
 from . import topics
