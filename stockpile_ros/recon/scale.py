@@ -7,7 +7,9 @@ the SfM poses (linear, every registered view that saw a corner) and compared wit
 geometry: a board by a similarity fit to its corner layout (uncertainty from a bootstrap over its
 corners), markers and bars by the ratio of known to triangulated lengths (uncertainty from the
 spread of the detections: leave-one-view-out over the views, and across markers when there are
-several), each with the printed size's own tolerance in quadrature.
+several), each with the printed size's own tolerance in quadrature. Marker corners are where
+lines fitted to the four outer edges meet (:func:`_edge_corners`). In a model whose camera was
+self-calibrated the focal length's own uncertainty is added to a target's (the pipeline does).
 
 Odometry: keyframe centres are fitted to the odometry positions at the keyframe stamps; its
 uncertainty is the fit's bootstrap spread and the odometry's own calibration uncertainty (a wheel
@@ -292,7 +294,9 @@ class ScaleEstimate:
         note: A warning about the estimate, empty when none.
         parts: The relative uncertainties ``rel_uncertainty`` is made of, by name (``fit`` and
             ``calibration`` for odometry; ``detections``, ``markers`` and ``printed_size`` for
-            markers; ``target`` and ``odometry`` when both are combined).
+            markers; ``focal`` added to a target's when the camera was self-calibrated, see
+            :func:`stockpile_ros.recon.sfm.focal_uncertainty`; ``target`` and ``odometry``
+            when both are combined).
 
     """
 
