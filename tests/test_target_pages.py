@@ -151,6 +151,15 @@ def test_a_target_that_does_not_fit_is_refused_with_the_reason(
         layout_pages(spec, paper, **marker)  # type: ignore[arg-type]
 
 
+def test_a_set_id_past_the_dictionary_or_an_unknown_paper_is_refused() -> None:
+    with pytest.raises(StockpileError, match='ids 0 to 49'):
+        layout_pages('aruco:DICT_4X4_50:*:0.1', ids=(3, 50))
+    with pytest.raises(StockpileError, match='a4, '):
+        layout_pages('aruco:DICT_4X4_50:1:0.1', 'b5')
+    with pytest.raises(StockpileError, match='no target'):
+        layout_pages(' , ')
+
+
 def test_the_command_writes_the_pdf_or_refuses(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -161,3 +170,6 @@ def test_the_command_writes_the_pdf_or_refuses(
     assert 'does not fit A4' in capsys.readouterr().err and not (tmp_path / 'b.pdf').exists()
     assert main(['target', '--out', str(tmp_path / 'b.pdf'), '--paper', 'a2',
                  'charuco:5x4:0.08:0.06']) == 0  # fmt: skip
+    assert main(['target', '--out', str(tmp_path / 's.pdf'), '--ids', '2,5',
+                 'aruco:DICT_4X4_50:*:0.1']) == 0  # fmt: skip
+    assert len(pdfium.PdfDocument(str(tmp_path / 's.pdf'))) == 2

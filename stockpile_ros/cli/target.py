@@ -21,9 +21,16 @@ either way round is refused, with the smallest paper that would take it.
 
 examples:
   stockpile target --out marker.pdf aruco:DICT_4X4_50:0:0.15
-  stockpile target --out markers.pdf --ids 0 1 2 3 'aruco:DICT_4X4_50:*:0.15'
+  stockpile target --out markers.pdf --ids 0,1,2,3 'aruco:DICT_4X4_50:*:0.15'
   stockpile target --out board.pdf --paper a2 charuco:5x4:0.08:0.06:DICT_4X4_50
 """
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(part) for part in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: marker ids joined by commas') from None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,9 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--out', type=Path, required=True, help='the PDF to write')
     parser.add_argument('--paper', choices=list(PAPERS), default='a4',
                         help='paper size (default %(default)s), portrait or landscape')  # fmt: skip
-    parser.add_argument('--ids', type=int, nargs='+', default=[0, 1], metavar='ID',
-                        help='markers printed for an aruco:DICT:*:SIZE_M spec '
-                             '(default %(default)s)')  # fmt: skip
+    parser.add_argument('--ids', type=_ids, default=(0, 1), metavar='ID,ID,...',
+                        help='markers printed for an aruco:DICT:*:SIZE_M spec, one page each '
+                             '(default 0,1)')  # fmt: skip
     parser.add_argument('--bar-marker', type=float, metavar='M',
                         help='black-square edge of a scale bar\'s markers [m] '
                              '(default a quarter of the bar)')  # fmt: skip
