@@ -506,14 +506,27 @@ def _edge_corners(grey: F64, quad: F64, cells: int) -> F64 | None:
         step = offsets[1] - offsets[0]
         offset = reach - (share[:, :-1] + share[:, 1:]).sum(axis=1) * step / 2
         edge = base + offset[:, None] * normal
-        mean = edge.mean(axis=0)
-        direction = np.linalg.svd(edge - mean)[2][0]
-        perpendicular = np.array([-direction[1], direction[0]])
+        for _ in range(2):
+            # The second fit leaves out points far off the first line (a shadow or a speck on
+            # the margin): beyond three robust standard deviations.
+            mean = edge.mean(axis=0)
+            direction = np.linalg.svd(edge - mean)[2][0]
+            perpendicular = np.array([-direction[1], direction[0]])
+            residual = np.abs((edge - mean) @ perpendicular)
+            keep = residual <= 3 * 1.4826 * float(np.median(residual)) + 1e-9
+            if keep.sum() < len(edge) // 2:
+                break
+            edge = edge[keep]
         lines.append((perpendicular, float(perpendicular @ mean)))
-    corners = []
-    for i in range(4):
-        (n1, c1), (n2, c2) = lines[(i - 1) % 4], lines[i]
-        corners.append(np.linalg.solve(np.array([n1, n2]), np.array([c1, c2])))
+    corners = np.array([
+        np.linalg.solve(np.array([lines[i - 1][0], lines[i][0]]),
+                        np.array([lines[i - 1][1], lines[i][1]]))
+        for i in range(4)
+    ])  # fmt: skip
+    # The window reaches under half a cell: a corner that moved farther is a failed fit.
+    cell = float(np.mean(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1))) / cells
+    if not np.all(np.linalg.norm(corners - quad, axis=1) <= cell):
+        return None
     return np.asarray(corners, dtype=np.float64)
 
 
