@@ -169,17 +169,19 @@ def _bar(spec: BarSpec, marker_size: float) -> tuple[tuple[Ink, ...], str, str, 
     )  # fmt: skip
     title = (f'scale bar: {spec.dictionary} ids {spec.first} and {spec.second}, centres '
              f'{_mm(spec.distance)} apart, markers {_mm(marker_size)}')  # fmt: skip
-    return ink, spec.text(), title, f'centre to centre: {_mm(spec.distance)}'
+    # The two squares are the same size: edge to like edge is centre to centre.
+    measure = f'the left edges of the two black squares: {_mm(spec.distance)} apart'
+    return ink, spec.text(), title, measure
 
 
 def _fits(paper: tuple[float, float], extent: tuple[float, float], quiet: float) -> bool:
+    """Whether the ink, its white, and the text and check line under it fit the page."""
     width, height = paper
+    # The white may reach into the unprinted margin (it is paper), the ink may not.
     side = max(PRINT_MARGIN, quiet)
-    info = max(_INFO_HEIGHT + PRINT_MARGIN, quiet)
     return (
         extent[0] + 2 * side <= width
         and extent[1] + side + quiet + _INFO_HEIGHT + PRINT_MARGIN <= height
-        and info <= height
         and width >= _INFO_WIDTH + 2 * PRINT_MARGIN
     )
 
