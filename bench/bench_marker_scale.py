@@ -115,6 +115,8 @@ def subpix_markers(image: np.ndarray) -> MarkerDetections:
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     code = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
     corners, ids, _ = cv2.aruco.ArucoDetector(code, params).detectMarkers(grey)
+    if ids is None:
+        return {}
     return {('DICT_4X4_50', int(i)): np.asarray(c, np.float64).reshape(4, 2)
             for i, c in zip(np.ravel(ids), corners, strict=True)}  # fmt: skip
 
