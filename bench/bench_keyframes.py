@@ -96,7 +96,7 @@ def run_case(case: Case, root: Path, sfm: bool) -> str:
     truth = json.loads((truth_folder(bag) / 'truth.json').read_text())
     angles = true_angles(truth, [r.stamp_ns for r in records])
     line = (
-        f'{case.name:16s} {case.frames:4d} frames  {kept["keyframes"]:3d} kept  '
+        f'{case.name:16s} {case.frames:4d} frames  {kept.keyframes:3d} kept  '
         f'true angle max {max(angles, default=0):5.1f} median {np.median(angles):5.1f} deg'
     )
     if sfm:

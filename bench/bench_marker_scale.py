@@ -146,8 +146,8 @@ def capture(
     focal = next(iter(model.views.values())).camera.fx / CAM.fx - 1
     parts = ', '.join(f'{k} {100 * v:.2f}' for k, v in scale.parts.items() if v is not None)
     rel = scale.rel_uncertainty or float('nan')
-    print(f'{label:13s} {counts["frames"]:6d} {counts["keyframes"]:9d} '
-          f'{report["registered"]:10d} {100 * focal:+7.2f} '
+    print(f'{label:13s} {counts.frames:6d} {counts.keyframes:9d} '
+          f'{report.registered:10d} {100 * focal:+7.2f} '
           f'{100 * (scale.metres_per_unit / true - 1):+8.3f} {100 * rel:7.3f}   {parts}',
           flush=True)  # fmt: skip
     return corners(label, walk, store, t)

@@ -40,16 +40,16 @@ def test_bag_keyframes_carry_camera_and_odometry_and_resume(tmp_path: Path) -> N
     every = {'selector.min_parallax': 0.0, 'selector.min_spacing': 1, 'selector.blur_ratio': 0.0,
              'work_dir': str(work.root)}  # fmt: skip
     first = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 3}))
-    assert first['keyframes'] == 3
+    assert first.keyframes == 3
     # A later run (the "restart") continues after the frames already kept.
     rest = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 8}))
-    assert rest['new'] == 5 and rest['keyframes'] == 8
+    assert rest.new == 5 and rest.keyframes == 8
     records = KeyframeStore(work.keyframes).records
     assert [r.index for r in records] == list(range(8))
     for record in records:
         assert record.camera is not None and record.camera.width == 96
-        assert record.odometry is not None and record.odometry['frame_id'] == 'odom'
+        assert record.odometry is not None and record.odometry.frame_id == 'odom'
         # The optical centre from odometry and /tf_static is the true camera position.
         np.testing.assert_allclose(
-            record.odometry['camera_position'], true_centres[record.stamp_ns], atol=1e-3
+            record.odometry.camera_position, true_centres[record.stamp_ns], atol=1e-3
         )

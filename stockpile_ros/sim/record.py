@@ -22,11 +22,11 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from .. import messages as m
 from ..bagio.writer import BagWriter
 from ..camera import CameraModel
 from ..errors import StockpileError
 from ..progress import progress
+from ..ros import messages as m
 from ..segment.gradation import gradation
 from .camera_path import OPTICAL_IN_LINK, CartPath, PathConfig, auto_distance, quat_from_matrix
 from .render import Lighting, Renderer, linear_to_srgb
