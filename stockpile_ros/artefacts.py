@@ -232,6 +232,8 @@ class SparseSummary:
         unregistered: Keyframes left out of the model kept.
         model_images: Every model, the largest first (what the registration gate reads).
         median_triangulation_angle_deg: Of the model's points [deg].
+        focal_rel_uncertainty: Relative standard deviation of a focal length bundle adjustment
+            refined (:func:`.recon.sfm.focal_uncertainty`), None for a fixed camera.
         unregistered_photos: Photo names of the keyframes left out (photo sources).
         gate: The registration gate's report (:class:`.recon.gates.GateReport`), None before.
 
@@ -253,6 +255,7 @@ class SparseSummary:
     unregistered: list[str]
     model_images: list[ModelImages]
     median_triangulation_angle_deg: float = math.nan
+    focal_rel_uncertainty: float | None = None
     unregistered_photos: list[str] = field(default_factory=list)
     gate: dict[str, Any] | None = None
     schema: str = SCHEMA

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -103,3 +104,6 @@ def test_a_rerun_gives_the_same_model(tmp_path: Path) -> None:
     for name, view in runs[0].views.items():
         assert np.array_equal(view.center, runs[1].views[name].center)
     assert np.array_equal(runs[0].points, runs[1].points)
+    # A camera fixed from CameraInfo has no focal length of its own to doubt.
+    sparse = json.loads((tmp_path / 'a' / 'sparse' / 'sparse.json').read_text())
+    assert sparse['camera'] == 'fixed from CameraInfo' and sparse['focal_rel_uncertainty'] is None

@@ -6,13 +6,14 @@ the stockpile frame lies in the odometry frame.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from ..artefacts import MeshInfo, WorkFolder, load
+from ..artefacts import MeshInfo, SparseSummary, WorkFolder, load
 from ..geometry import Similarity, umeyama
 from .keyframes import KeyframeStore
 from .options import ReconOptions
@@ -83,9 +84,14 @@ def on_path(
 
 
 def _target_scale(
-    store: KeyframeStore, model: SparseModel, options: ReconOptions
+    store: KeyframeStore, model: SparseModel, options: ReconOptions, focal: float | None
 ) -> tuple[ScaleEstimate | None, dict[str, Any]]:
-    """Scale from the boards and markers of ``options.target``, pooled, with what each gave."""
+    """Scale from the boards and markers of ``options.target``, pooled, with what each gave.
+
+    ``focal`` is the relative uncertainty of a self-calibrated focal length
+    (:func:`.sfm.focal_uncertainty`), added in quadrature as the part ``focal``: the target's
+    scale is carried to the whole model through depths that rest on it.
+    """
     boards = [t for t in options.target if isinstance(t, TargetSpec)]
     markers = [t for t in options.target if isinstance(t, (MarkerSpec, BarSpec))]
     dictionaries = [t.dictionary for t in markers]
@@ -126,6 +132,9 @@ def _target_scale(
         if estimate is not None:
             estimates['markers'] = estimate
     pooled = pool_targets(estimates)
+    if pooled is not None and pooled.rel_uncertainty is not None and focal is not None:
+        pooled = replace(pooled, rel_uncertainty=math.hypot(pooled.rel_uncertainty, focal),
+                         parts={**pooled.parts, 'focal': focal})  # fmt: skip
     details['views'] = len(model.views)
     return pooled, details
 
@@ -138,7 +147,9 @@ def estimate_scale(
     details: dict[str, Any] = {}
     target = None
     if options.target:
-        target, details['target'] = _target_scale(store, model, options)
+        sparse = work.sparse / 'sparse.json'
+        focal = load(SparseSummary, sparse).focal_rel_uncertainty if sparse.exists() else None
+        target, details['target'] = _target_scale(store, model, options, focal)
     odometry = None
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
