@@ -9,7 +9,9 @@ cells along their normals (``bed_surface``). Then ``segment_mesh`` with the smal
 interest set to the material's smallest b (as a class check would set it), ``measure_rocks``, and
 the score against the true label of every face (``score_labels``: visible = at least 30 % of the
 rock's surface seen, one-to-one matches at surface IoU >= 0.5). One row per material and
-resolution; ``edges/b`` is the smallest b over the mesh's median edge.
+resolution; ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is
+``segment_mesh`` and ``measure_rocks`` on one thread, and their growth with the face count
+(a least-squares power law over the resolutions) ends each material.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20]
@@ -68,6 +70,7 @@ def main() -> None:
     for material in args.materials:
         placed = bed(material, args.rocks, args.seed, args.cache)
         lo, hi = MATERIALS[material]
+        cost = []
         for across in args.edges:
             surface = bed_surface(placed, lo / across, np.random.default_rng(args.seed), args.noise)
             params = SegmentParams.preset('default', **{'min_rock_b': lo, **overrides})
@@ -92,6 +95,11 @@ def main() -> None:
                   f'{s.precision:9.3f} {s.merges:6d} {s.splits:6d}  {100 * s.b_error:6.1f}% '
                   f'{100 * s.b_bias:+5.1f}% {100 * s.d50_error:+6.1f}%  {seconds:7.1f}',
                   flush=True)  # fmt: skip
+            cost.append((len(surface.faces), seconds))
+        if len(cost) >= 2:
+            faces, secs = np.log(np.array(cost)).T
+            growth = np.polyfit(faces, secs, 1)[0]
+            print(f'{material}: segmentation and measurement cost grows as faces^{growth:.2f}')
 
 
 if __name__ == '__main__':
