@@ -9,9 +9,10 @@ cells along their normals (``bed_surface``). Then ``segment_mesh`` with the smal
 interest set to the material's smallest b (as a class check would set it), ``measure_rocks``, and
 the score against the true label of every face (``score_labels``: visible = at least 30 % of the
 rock's surface seen, one-to-one matches at surface IoU >= 0.5). One row per material and
-resolution; ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is
-``segment_mesh`` and ``measure_rocks`` on one thread, and their growth with the face count
-(a least-squares power law over the resolutions) ends each material.
+resolution; ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU
+time of ``segment_mesh`` and ``measure_rocks`` on one thread (which cores shared with other work
+do not inflate), and their growth with the face count (a least-squares power law over the
+resolutions) ends each material.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20]
@@ -74,10 +75,10 @@ def main() -> None:
         for across in args.edges:
             surface = bed_surface(placed, lo / across, np.random.default_rng(args.seed), args.noise)
             params = SegmentParams.preset('default', **{'min_rock_b': lo, **overrides})
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             seg = segment_mesh(surface.vertices, surface.faces, params)
             rocks = measure_rocks(surface.vertices, seg)
-            seconds = time.perf_counter() - t0
+            seconds = time.process_time() - t0
             truth = {
                 k: SizedRock(r['b'], r['mass'], r['visible_fraction'])
                 for k, r in surface.rocks.items()
