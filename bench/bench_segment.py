@@ -30,17 +30,17 @@ import numpy as np  # noqa: E402
 from stockpile_ros.meshio import read_labelled_mesh  # noqa: E402
 from stockpile_ros.segment import segmentation  # noqa: E402
 from stockpile_ros.segment.adjacency import face_adjacency, face_geometry  # noqa: E402
-from stockpile_ros.segment.bfs import reference_bfs  # noqa: E402
 from stockpile_ros.segment.criterion import edge_scores  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks  # noqa: E402
 from stockpile_ros.segment.region import grow_regions  # noqa: E402
-from stockpile_ros.segment.scoring import rock_recall_precision  # noqa: E402
 from stockpile_ros.segment.segmentation import (  # noqa: E402
     SegmentParams,
     segment_mesh,
     valley_depths,
 )
-from stockpile_ros.segment.synthetic import (  # noqa: E402
+from stockpile_ros.tools.reference_bfs import reference_bfs  # noqa: E402
+from stockpile_ros.tools.scoring import rock_recall_precision  # noqa: E402
+from stockpile_ros.tools.synthetic import (  # noqa: E402
     make_pile,
     poisson_mesh,
     sample_scene,

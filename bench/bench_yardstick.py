@@ -1,10 +1,10 @@
 """A yardstick that looks like the field: beds of hundreds of rocks per material, meshed at 4-20
 edges across the smallest rock's b, segmented and measured with the default mode.
 
-Per material (``stockpile_ros.sim.bed.MATERIALS``: aggregate 20-80 mm, cobble 0.1-0.3 m, riprap
-0.3-1.5 m) one bed of ``--rocks`` rocks covering the ground (``build_bed``), surveyed from above
-and meshed by Poisson at each resolution (finest cell = the smallest b over ``--edges``; the
-median edge comes out within a few percent of the cell), the points with noise of ``--noise``
+Per material (``stockpile_ros.tools.sim.bed.MATERIALS``: aggregate 20-80 mm, cobble 0.1-0.3 m,
+riprap 0.3-1.5 m) one bed of ``--rocks`` rocks covering the ground (``build_bed``), surveyed from
+above and meshed by Poisson at each resolution (finest cell = the smallest b over ``--edges``;
+the median edge comes out within a few percent of the cell), the points with noise of ``--noise``
 cells along their normals (``bed_surface``). Then ``segment_mesh`` with the smallest rock of
 interest set to the material's smallest b (as a class check would set it), ``measure_rocks``, and
 the score against the true label of every face (``score_labels``: visible = at least 30 % of the
@@ -34,11 +34,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from stockpile_ros.evaluation.labels import SizedRock, score_labels  # noqa: E402
 from stockpile_ros.segment.measure import measure_rocks  # noqa: E402
 from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh  # noqa: E402
-from stockpile_ros.sim.bed import MATERIALS, BedConfig, bed_surface, build_bed  # noqa: E402
-from stockpile_ros.sim.pile import Gradation  # noqa: E402
+from stockpile_ros.tools.evaluation.labels import SizedRock, score_labels  # noqa: E402
+from stockpile_ros.tools.sim.bed import MATERIALS, BedConfig, bed_surface, build_bed  # noqa: E402
+from stockpile_ros.tools.sim.pile import Gradation  # noqa: E402
 
 
 def bed(material: str, rocks: int, seed: int, cache: Path):

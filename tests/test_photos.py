@@ -102,11 +102,11 @@ def test_unordered_photos_register_and_scale_from_one_marker(
     folder, truth = photos
     work = WorkFolder(tmp_path)
     options = build_settings({'recon.target': MARKER}).recon
-    assert run_keyframes(folder, work, options)['keyframes'] == 16
+    assert run_keyframes(folder, work, options).keyframes == 16
     report = run_sfm_stage(work, options)
-    assert report['matcher'] == 'exhaustive' and 'EXIF focal length of 16/16' in report['camera']
-    assert report['registered'] == 16 and report['model_images'][0]['registered'] == 16
-    assert sorted(report['model_images'][0]['photos']) == sorted(truth)
+    assert report.matcher == 'exhaustive' and 'EXIF focal length of 16/16' in report.camera
+    assert report.registered == 16 and report.model_images[0].registered == 16
+    assert sorted(report.model_images[0].photos) == sorted(truth)
     registered, scale, error = _scale_error(work, truth, photo_names(work))
     assert registered == 16
     assert abs(error) <= 0.005, error
@@ -131,7 +131,7 @@ def test_video_of_the_same_scene_scales_the_same(tmp_path: Path) -> None:
     # frames as close as a 30 fps walk would offer them.
     values = {'recon.target': MARKER, 'selector.min_parallax': 0.03, 'selector.min_spacing': 1}
     options = build_settings(values).recon
-    kept = run_keyframes(video, work, options)['keyframes']
+    kept = run_keyframes(video, work, options).keyframes
     assert 12 <= kept < frames
     report = run_sfm_stage(work, options)
     assert report['matcher'] == 'sequential' and report['registered'] == kept

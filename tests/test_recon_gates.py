@@ -64,6 +64,6 @@ def test_half_the_keyframes_of_something_else_stop_the_run(tmp_path: Path) -> No
     assert not outcome.ok and outcome.stage == 'sfm'
     assert 'of 12 keyframes registered in one model' in outcome.reason
     assert 'overlap' in outcome.advice
-    assert 'dense' not in outcome.results and not (tmp_path / 'dense').exists()
+    assert outcome.dense is None and not (tmp_path / 'dense').exists()
     gate = json.loads((tmp_path / 'sparse' / 'sparse.json').read_text())['gate']
     assert not gate['passed'] and gate['registered'] <= 7

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from recon_synth import look_at, orbit, render, scene_mesh
 
+from stockpile_ros.artefacts import KeyframeRecord
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.errors import CaptureError
-from stockpile_ros.recon.keyframes import KeyframeRecord, KeyframeStore
+from stockpile_ros.recon.keyframes import KeyframeStore
 from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
 from stockpile_ros.recon.sfm import SfmOptions, _shared_camera, load_sparse
 

@@ -7,11 +7,11 @@ import functools
 import numpy as np
 import pytest
 
-from stockpile_ros.evaluation.labels import LabelScore, SizedRock, score_labels
 from stockpile_ros.segment.measure import measure_rocks
 from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
-from stockpile_ros.sim.bed import BedConfig, BedSurface, bed_surface, build_bed
-from stockpile_ros.sim.pile import Gradation, PlacedRock
+from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
+from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed
+from stockpile_ros.tools.sim.pile import Gradation, PlacedRock
 
 SMALLEST = 0.1
 

@@ -18,12 +18,26 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
-from ..bagio.images import DEFAULT_MAX_PIXELS
+from ..artefacts import (
+    DenseSummary,
+    KeyframePose,
+    KeyframeSummary,
+    MeshInfo,
+    ScaleRecord,
+    SimilarityRecord,
+    SparseSummary,
+    StageResult,
+    from_json,
+    load,
+    save,
+    to_json,
+)
 from ..errors import CaptureError, StockpileError
 from ..geometry import Similarity, umeyama
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
 from ..ranges import Range
+from ..ros.images import DEFAULT_MAX_PIXELS
 from .collector import KeyframeCollector
 from .dense import DenseOptions, run_dense
 from .exif import read_intrinsics
@@ -163,7 +177,7 @@ class WorkFolder:
         return self.root / 'surface'
 
 
-def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> KeyframeSummary:
     """Select keyframes from photos or a video into ``work.keyframes``, resuming from what is there.
 
     Bags go through the keyframe component instead, as the nodes take them
@@ -203,12 +217,7 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> dict
         )
     if kind == 'photos':
         _write_photos(source, work, store)
-    return {
-        'frames': seen,
-        'keyframes': len(store.records),
-        'new': len(store.records) - before,
-        'decisions': reasons,
-    }
+    return KeyframeSummary(seen, len(store.records), len(store.records) - before, dict(reasons))
 
 
 def _write_photos(source: Path, work: WorkFolder, store: KeyframeStore) -> None:
@@ -229,7 +238,7 @@ def photo_names(work: WorkFolder) -> dict[str, str]:
     return {p['keyframe']: p['file'] for p in photos if p['keyframe']}
 
 
-def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> SparseSummary:
     """Structure-from-Motion of the stored keyframes into ``work.sparse``, then the gate.
 
     Keyframes from photos (``photos.json``) are an unordered set, with their EXIF focal lengths
@@ -256,25 +265,25 @@ def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
         report = run_sfm(work.keyframes, store.records, work.sparse, options.sfm,
                          priors=priors, unordered=True)  # fmt: skip
         names = photo_names(work)
-        for entry in report['model_images']:
-            entry['photos'] = [names.get(n, n) for n in entry['images']]
-        report['unregistered_photos'] = [names.get(n, n) for n in report['unregistered']]
+        for entry in report.model_images:
+            entry.photos = [names.get(n, n) for n in entry.images]
+        report.unregistered_photos = [names.get(n, n) for n in report.unregistered]
     model = load_sparse(work.sparse)
     gate = registration_gate(
         [r.file for r in store.records],
-        [entry['images'] for entry in report['model_images']],
+        [entry.images for entry in report.model_images],
         options.gate,
         centres={name: view.center for name, view in model.views.items()},
         pile_centre=np.median(model.points, axis=0) if len(model.points) else None,
         noun=noun,
     )
-    report['gate'] = gate.as_dict()
-    (work.sparse / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
+    report.gate = gate.as_dict()
+    save(report, work.sparse / 'sparse.json')
     gate.check('sfm')
     return report
 
 
-def run_dense_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+def run_dense_stage(work: WorkFolder, options: ReconOptions) -> DenseSummary:
     """Dense cloud of the registered keyframes into ``work.dense``.
 
     Raises:
@@ -285,14 +294,16 @@ def run_dense_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
     sparse_json = work.sparse / 'sparse.json'
     if not sparse_json.exists():
         raise StockpileError(f'{work.sparse}: no sparse model; run the sfm stage first')
-    gate = json.loads(sparse_json.read_text()).get('gate', {})
+    gate = load(SparseSummary, sparse_json).gate
     if gate and not gate['passed']:
         raise CaptureError('sfm', gate['reason'], gate['advice'])
     store = KeyframeStore(work.keyframes)
     model, dropped = on_path(work, load_sparse(work.sparse), options)
     order = [r.file for r in store.records]
-    stats = run_dense(work.keyframes, work.sparse, model, order, work.dense, options.dense)
-    return {**stats, 'off_path': dropped}
+    summary = run_dense(work.keyframes, work.sparse, model, order, work.dense, options.dense)
+    summary.off_path = dropped
+    save(summary, work.dense / 'dense.json')
+    return summary
 
 
 def _odometry_pairs(
@@ -303,12 +314,12 @@ def _odometry_pairs(
     rows = sorted(
         (r.stamp_ns, r.file, r.odometry)
         for r in store.records
-        if r.odometry is not None and 'camera_position' in r.odometry and r.file in model.views
+        if r.odometry and r.odometry.camera_position is not None and r.file in model.views
     )
     names = [name for _, name, _ in rows]
     stamps = np.array([stamp for stamp, _, _ in rows], dtype=np.int64)
     centres = np.array([model.views[name].center for name in names]).reshape(-1, 3)
-    positions = np.array([odo['camera_position'] for _, _, odo in rows], dtype=np.float64).reshape(
+    positions = np.array([odo.camera_position for _, _, odo in rows], dtype=np.float64).reshape(
         -1, 3
     )
     return names, stamps, centres, positions
@@ -399,7 +410,7 @@ def estimate_scale(
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
         odometry_only = [r.odometry for r in store.records if r.odometry is not None]
-        unplaced = sum(1 for odo in odometry_only if 'camera_position' not in odo)
+        unplaced = sum(1 for odo in odometry_only if odo.camera_position is None)
         if unplaced:
             # Odometry without a /tf link from its base to the camera: no camera centre is known.
             details['odometry'] = {'keyframes_without_camera_pose': unplaced}
@@ -431,7 +442,7 @@ def _keyframe_poses(
     sim_scale: float,
     sim_rot: npt.NDArray[np.float64],
     sim_t: npt.NDArray[np.float64],
-) -> list[dict[str, Any]]:
+) -> list[KeyframePose]:
     out = []
     for record in KeyframeStore(work.keyframes).records:
         view = model.views.get(record.file)
@@ -440,12 +451,12 @@ def _keyframe_poses(
         position = sim_scale * sim_rot @ view.center + sim_t
         quat = Rotation.from_matrix(sim_rot @ view.rotation.T).as_quat()
         out.append(
-            {
-                'stamp_ns': record.stamp_ns,
-                'file': record.file,
-                'position': [float(v) for v in position],
-                'orientation_xyzw': [float(v) for v in quat],
-            }
+            KeyframePose(
+                record.stamp_ns,
+                [float(v) for v in position],
+                [float(v) for v in quat],
+                record.file,
+            )
         )
     return out
 
@@ -461,26 +472,26 @@ def odom_from_stockpile(work: WorkFolder) -> tuple[str, Similarity] | None:
         registered keyframes.
 
     """
-    info = json.loads((work.mesh / 'mesh.json').read_text())
-    in_stockpile = {k['file']: k['position'] for k in info['keyframes'] if 'file' in k}
+    info = load(MeshInfo, work.mesh / 'mesh.json')
+    in_stockpile = {k.file: k.position for k in info.keyframes if k.file}
     src, dst, frame = [], [], ''
     for record in KeyframeStore(work.keyframes).records:
         odo = record.odometry
-        if odo is None or 'camera_position' not in odo or record.file not in in_stockpile:
+        if odo is None or odo.camera_position is None or record.file not in in_stockpile:
             continue
         src.append(in_stockpile[record.file])
-        dst.append(odo['camera_position'])
-        frame = str(odo.get('frame_id', 'odom'))
+        dst.append(odo.camera_position)
+        frame = odo.frame_id
     if len(src) < 3:
         return None
     sim = umeyama(np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64))
-    if info['scale']['method'] != 'none':
+    if info.scale.metric:
         centre_s, centre_d = np.mean(src, axis=0), np.mean(dst, axis=0)
         sim = Similarity(1.0, sim.rotation, centre_d - sim.rotation @ centre_s)
     return frame, sim
 
 
-def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> MeshInfo:
     """Scale, ground alignment and Poisson surface into ``work.mesh``; returns ``mesh.json``."""
     dense_path = work.dense / 'dense.ply'
     if not dense_path.exists():
@@ -522,30 +533,22 @@ def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
             colors=np.clip(np.round(vcol * 255), 0, 255).astype(np.uint8) if len(vcol) else None,
         ),
     )
-    info: dict[str, Any] = {
-        'schema': 'stockpile-mesh/1',
-        'frame_id': 'stockpile',
-        'units': 'm' if scale.method != 'none' else 'model',
-        'scale': {
-            'method': scale.method,
-            'metres_per_unit': scale.metres_per_unit,
-            'rel_uncertainty': scale.rel_uncertainty,
-            'parts': scale.parts,
-            'note': scale.note,
-        },
-        'scale_details': {**scale_details, 'note': scale.note},
-        'ground_plane_model': [float(v) for v in ground.plane],
-        'ground_inliers': len(ground.inliers),
-        'model_to_stockpile': {
-            'scale': sim.scale,
-            'rotation': [float(v) for v in sim.rotation.ravel()],
-            'translation': [float(v) for v in sim.translation],
-        },
-        'keyframes': _keyframe_poses(model, work, sim.scale, sim.rotation, sim.translation),
-        'keyframes_off_path': dropped,
-        'poisson': poisson,
-    }
-    (work.mesh / 'mesh.json').write_text(json.dumps(info, indent=1) + '\n')
+    info = MeshInfo(
+        scale=from_json(ScaleRecord, to_json(scale.__dict__), 'scale'),
+        units='m' if scale.method != 'none' else 'model',
+        scale_details=to_json({**scale_details, 'note': scale.note}),
+        ground_plane_model=[float(v) for v in ground.plane],
+        ground_inliers=len(ground.inliers),
+        model_to_stockpile=SimilarityRecord(
+            float(sim.scale),
+            [float(v) for v in sim.rotation.ravel()],
+            [float(v) for v in sim.translation],
+        ),
+        keyframes=_keyframe_poses(model, work, sim.scale, sim.rotation, sim.translation),
+        keyframes_off_path=dropped,
+        poisson=to_json(poisson),
+    )
+    save(info, work.mesh / 'mesh.json')
     return info
 
 
@@ -554,9 +557,9 @@ def reconstruct(
     work_dir: Path,
     options: ReconOptions,
     stage: str = 'all',
-    report: Callable[[str, dict[str, Any], float], None] | None = None,
-    keyframe_stage: Callable[[Path, WorkFolder, ReconOptions], dict[str, Any]] | None = None,
-) -> dict[str, dict[str, Any]]:
+    report: Callable[[str, StageResult, float], None] | None = None,
+    keyframe_stage: Callable[[Path, WorkFolder, ReconOptions], KeyframeSummary] | None = None,
+) -> dict[str, StageResult]:
     """Run one stage or all of them in order.
 
     Args:
@@ -575,7 +578,7 @@ def reconstruct(
     if stage != 'all' and stage not in STAGES:
         raise StockpileError(f'unknown stage {stage!r}; choose from {", ".join(STAGES)}, all')
     work = WorkFolder(work_dir)
-    results: dict[str, dict[str, Any]] = {}
+    results: dict[str, StageResult] = {}
     for name in STAGES if stage == 'all' else (stage,):
         start = time.perf_counter()
         if name == 'keyframes':

@@ -11,7 +11,6 @@ half a pixel on the way in and out.
 
 from __future__ import annotations
 
-import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,10 +21,10 @@ import numpy.typing as npt
 import pycolmap
 from PIL import Image
 
+from ..artefacts import KeyframeRecord, ModelImages, SparseSummary, save
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..ranges import Range
-from .keyframes import KeyframeRecord
 
 __all__ = ['SfmOptions', 'SparseModel', 'View', 'load_sparse', 'run_sfm']
 
@@ -277,7 +276,7 @@ def run_sfm(
     *,
     priors: dict[str, float] | None = None,
     unordered: bool = False,
-) -> dict[str, Any]:
+) -> SparseSummary:
     """Reconstruct the keyframes; writes the model and ``sparse.json`` into ``out_dir``.
 
     Args:
@@ -435,38 +434,37 @@ def run_sfm(
     ranked = sorted(models.values(), key=lambda rec: -rec.num_reg_images())
     best = ranked[0]
     registered = int(best.num_reg_images())
-    report: dict[str, Any] = {
-        'registered': registered,
-        'total': len(names),
-        'registered_fraction': registered / len(names),
-        'models': len(models),
-        'points': int(best.num_points3D()),
-        'mean_reprojection_error_px': float(best.compute_mean_reprojection_error()),
-        'mean_features': mean_features,
-        'camera': _camera_text(fixed, with_prior, len(names)),
-        'cameras': [_camera_report(cam) for cam in best.cameras.values()],
-        'matcher': matcher,
-        'matcher_note': matcher_note,
-        'mapper': options.mapper,
-        'unregistered': sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
+    report = SparseSummary(
+        registered=registered,
+        total=len(names),
+        registered_fraction=registered / len(names),
+        models=len(models),
+        points=int(best.num_points3D()),
+        mean_reprojection_error_px=float(best.compute_mean_reprojection_error()),
+        mean_features=mean_features,
+        camera=_camera_text(fixed, with_prior, len(names)),
+        cameras=[_camera_report(cam) for cam in best.cameras.values()],
+        matcher=matcher,
+        matcher_note=matcher_note,
+        mapper=options.mapper,
+        unregistered=sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
         # Every model, the largest (the one kept) first: which keyframes landed where (also what
         # the registration gate reads).
-        'model_images': [
-            {
-                'registered': int(rec.num_reg_images()),
-                'images': sorted(rec.image(i).name for i in rec.reg_image_ids()),
-            }
+        model_images=[
+            ModelImages(
+                int(rec.num_reg_images()), sorted(rec.image(i).name for i in rec.reg_image_ids())
+            )
             for rec in ranked
         ],
-    }
-    report['median_triangulation_angle_deg'] = _median_triangulation_angle(best)
+        median_triangulation_angle_deg=_median_triangulation_angle(best),
+    )
     best.write(out_dir)
-    (out_dir / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
-    if report['median_triangulation_angle_deg'] < options.min_triangulation_angle:
+    save(report, out_dir / 'sparse.json')
+    if report.median_triangulation_angle_deg < options.min_triangulation_angle:
         raise CaptureError(
             'sfm',
             'the keyframes see the scene from nearly one place (median triangulation angle '
-            f'{report["median_triangulation_angle_deg"]:.1f} degrees): depth cannot be measured '
+            f'{report.median_triangulation_angle_deg:.1f} degrees): depth cannot be measured '
             'from a rotation on the spot',
             advice_more,
         )

@@ -1,9 +1,9 @@
 """Score a segmentation against true labels on the same mesh (the yardstick of bench/).
 
 Where the true rock under every face is known (a simulated surface meshed directly, see
-:mod:`stockpile_ros.sim.bed`), no transfer between surfaces is needed: each face's true label
-is given, and the matching is the one ``stockpile evaluate`` uses (``match_rocks``: one to one,
-surface IoU at least ``min_iou``), with each face a piece of its own. The figures are those of
+:mod:`stockpile_ros.tools.sim.bed`), no transfer between surfaces is needed: each face's true
+label is given, and the matching is the one ``stockpile evaluate`` uses (``match_rocks``: one to
+one, surface IoU at least ``min_iou``), with each face a piece of its own. The figures are those of
 ``evaluate``'s visible detection and sizes: true rocks under ``visible_threshold`` are neither
 missed when undetected nor counted against precision when found.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..segment.gradation import gradation
+from ...segment.gradation import gradation
 from .match import LabelTransfer, MatchOptions, match_rocks
 
 __all__ = ['LabelScore', 'SizedRock', 'score_labels']

@@ -33,8 +33,8 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from ..errors import StockpileError
-from ..segment.synthetic import poisson_mesh
+from ...errors import StockpileError
+from ..synthetic import poisson_mesh
 from .pile import (
     Gradation,
     PileConfig,
