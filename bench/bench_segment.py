@@ -28,16 +28,14 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stockpile_ros.meshio import read_labelled_mesh  # noqa: E402
-from stockpile_ros.segment import segmentation  # noqa: E402
+from stockpile_ros.segment import valleys  # noqa: E402
 from stockpile_ros.segment.adjacency import face_adjacency, face_geometry  # noqa: E402
 from stockpile_ros.segment.criterion import edge_scores  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks  # noqa: E402
+from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.region import grow_regions  # noqa: E402
-from stockpile_ros.segment.segmentation import (  # noqa: E402
-    SegmentParams,
-    segment_mesh,
-    valley_depths,
-)
+from stockpile_ros.segment.segmentation import segment_mesh  # noqa: E402
+from stockpile_ros.segment.valleys import valley_depths  # noqa: E402
 from stockpile_ros.tools.reference_bfs import reference_bfs  # noqa: E402
 from stockpile_ros.tools.scoring import rock_recall_precision  # noqa: E402
 from stockpile_ros.tools.synthetic import (  # noqa: E402
@@ -81,12 +79,12 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
     fast_default = segment_mesh(v, f, d)
     scale = fast_default.scale
     # The baseline in the same run: every valley radius smoothed on the mesh itself, as before
-    # the coarse graph (segmentation.COARSE_MIN_EDGES).
-    coarse_min = segmentation.COARSE_MIN_EDGES
-    segmentation.COARSE_MIN_EDGES = float('inf')
+    # the coarse graph (valleys.COARSE_MIN_EDGES).
+    coarse_min = valleys.COARSE_MIN_EDGES
+    valleys.COARSE_MIN_EDGES = float('inf')
     t_mesh = best_of(lambda: segment_mesh(v, f, d), repeat)
     same = np.array_equal(segment_mesh(v, f, d).labels, fast_default.labels)
-    segmentation.COARSE_MIN_EDGES = coarse_min
+    valleys.COARSE_MIN_EDGES = coarse_min
     print(
         f'default mode, valleys smoothed on the mesh alone: {t_mesh:.2f} s; with the coarse '
         f'graph {t_default:.2f} s, ratio {t_mesh / t_default:.2f}x, labels identical: {same}'

@@ -35,7 +35,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stockpile_ros.segment.measure import measure_rocks  # noqa: E402
-from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh  # noqa: E402
+from stockpile_ros.segment.params import SegmentParams  # noqa: E402
+from stockpile_ros.segment.segmentation import segment_mesh  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import SizedRock, score_labels  # noqa: E402
 from stockpile_ros.tools.sim.bed import MATERIALS, BedConfig, bed_surface, build_bed  # noqa: E402
 from stockpile_ros.tools.sim.pile import Gradation  # noqa: E402

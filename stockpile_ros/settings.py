@@ -38,8 +38,8 @@ from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions
 from .segment.gradation import load_class_table
 from .segment.measure import MeasureParams
+from .segment.params import SegmentParams
 from .segment.qa import ReportOptions
-from .segment.segmentation import SegmentParams
 
 __all__ = [
     'EFFECTIVE_PARAMS',

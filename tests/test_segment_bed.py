@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from stockpile_ros.segment.measure import measure_rocks
-from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
+from stockpile_ros.segment.params import SegmentParams
+from stockpile_ros.segment.segmentation import segment_mesh
 from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
 from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed
 from stockpile_ros.tools.sim.pile import Gradation, PlacedRock

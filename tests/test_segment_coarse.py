@@ -7,9 +7,10 @@ import numpy.typing as npt
 import pytest
 from segment_fixtures import height_field
 
-from stockpile_ros.segment import segmentation
+from stockpile_ros.segment import valleys
 from stockpile_ros.segment.adjacency import face_geometry
-from stockpile_ros.segment.segmentation import median_edge, valley_depths
+from stockpile_ros.segment.params import median_edge
+from stockpile_ros.segment.valleys import valley_depths
 
 F64 = npt.NDArray[np.float64]
 
@@ -27,9 +28,9 @@ def test_a_wide_radius_on_the_coarse_graph_finds_the_valleys_of_the_mesh(
     geom = face_geometry(v, f)
     edge = median_edge(v, f)
     radius = 8 * edge
-    assert radius / segmentation.COARSE_CELLS >= segmentation.COARSE_MIN_EDGES * edge
+    assert radius / valleys.COARSE_CELLS >= valleys.COARSE_MIN_EDGES * edge
     (coarse,) = valley_depths(v, f, geom, [radius], edge)
-    monkeypatch.setattr(segmentation, 'COARSE_MIN_EDGES', float('inf'))
+    monkeypatch.setattr(valleys, 'COARSE_MIN_EDGES', float('inf'))
     (mesh,) = valley_depths(v, f, geom, [radius], edge)
     x, y, z = geom.centroids.T
     # On the rocks (the ground is left out of the search) and away from the mesh's border, where

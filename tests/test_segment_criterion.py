@@ -4,7 +4,8 @@ import numpy as np
 
 from stockpile_ros.segment.adjacency import face_adjacency, face_geometry
 from stockpile_ros.segment.criterion import PAPER_THRESHOLD, edge_score, edge_scores
-from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
+from stockpile_ros.segment.params import SegmentParams
+from stockpile_ros.segment.segmentation import segment_mesh
 
 
 def _hinge(bend_deg: float, n: int = 6) -> tuple[np.ndarray, np.ndarray]:

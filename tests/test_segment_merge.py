@@ -5,7 +5,7 @@ import pytest
 from segment_fixtures import height_field
 
 from stockpile_ros.segment.adjacency import face_adjacency, face_geometry
-from stockpile_ros.segment.segmentation import merge_convex_borders
+from stockpile_ros.segment.cleanup import merge_convex_borders
 
 
 def _split(kind: str, depth: float = 0.05) -> np.ndarray:

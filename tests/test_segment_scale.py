@@ -11,19 +11,18 @@ from segment_fixtures import height_field, small_pile
 
 from stockpile_ros.artefacts import MeshInfo, ScaleRecord
 from stockpile_ros.segment.adjacency import FaceAdjacency
+from stockpile_ros.segment.cleanup import drop_facing_down, merge_fragments
 from stockpile_ros.segment.gradation import load_class_table
 from stockpile_ros.segment.measure import measure_rocks
-from stockpile_ros.segment.pipeline import analyse_mesh
-from stockpile_ros.segment.segmentation import (
+from stockpile_ros.segment.params import (
     RESOLVABLE_EDGES,
     SegmentParams,
     class_min_rock_b,
-    drop_facing_down,
     median_edge,
-    merge_fragments,
     rock_scale,
-    segment_mesh,
 )
+from stockpile_ros.segment.pipeline import analyse_mesh
+from stockpile_ros.segment.segmentation import segment_mesh
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

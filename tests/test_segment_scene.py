@@ -4,7 +4,8 @@ import numpy as np
 from segment_fixtures import small_pile
 
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks
-from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
+from stockpile_ros.segment.params import SegmentParams
+from stockpile_ros.segment.segmentation import segment_mesh
 from stockpile_ros.tools.scoring import rock_recall_precision
 from stockpile_ros.tools.synthetic import truth_face_labels
 

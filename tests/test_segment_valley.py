@@ -11,12 +11,11 @@ import pytest
 from segment_fixtures import height_field
 
 from stockpile_ros.segment.adjacency import FaceAdjacency, face_geometry
-from stockpile_ros.segment.segmentation import (
+from stockpile_ros.segment.cleanup import hand_back
+from stockpile_ros.segment.params import SegmentParams, median_edge
+from stockpile_ros.segment.segmentation import segment_mesh
+from stockpile_ros.segment.valleys import (
     MAX_SMOOTHING_PASSES,
-    SegmentParams,
-    hand_back,
-    median_edge,
-    segment_mesh,
     smoothing_passes,
     split_at_valleys,
     valley_depths,

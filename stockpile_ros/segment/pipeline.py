@@ -15,8 +15,9 @@ from scipy.spatial.transform import Rotation
 from ..artefacts import MeshInfo, to_json
 from .gradation import gradation
 from .measure import MeasureParams, RockMeasure, measure_rocks, solid_axes, visibility_warnings
+from .params import SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
-from .segmentation import Segmentation, SegmentParams, segment_mesh
+from .segmentation import Segmentation, segment_mesh
 
 __all__ = ['REPORT_SCHEMA', 'Analysis', 'analyse_mesh', 'json_safe', 'principal_axes']
 

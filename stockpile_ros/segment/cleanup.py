@@ -1,0 +1,238 @@
+"""The clean-ups after the search.
+
+Faces handed back to their neighbours, fragments merged, undersides dropped, and neighbours
+joined where the border between them is convex.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial import ConvexHull, QhullError
+
+from .adjacency import FaceAdjacency, FaceGeometry
+
+__all__ = [
+    'BORDER_SAMPLES',
+    'HULL_SAMPLES',
+    'drop_facing_down',
+    'hand_back',
+    'merge_convex_borders',
+    'merge_fragments',
+]
+
+
+F64 = npt.NDArray[np.float64]
+I32 = npt.NDArray[np.int32]
+
+
+BORDER_SAMPLES = 256
+
+
+HULL_SAMPLES = 2000
+
+
+def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
+    """Give unlabelled ``free`` faces the label of a labelled neighbour, front by front.
+
+    Every round each free face next to a labelled face takes its label, so a band between two
+    regions is split where the fronts from both sides meet.
+    """
+    labels = labels.copy()
+    src, dst = adj.src, adj.dst
+    open_edge = free[dst] & (labels[dst] == 0)
+    src, dst = src[open_edge], dst[open_edge]
+    while True:
+        take = labels[src] > 0
+        if not take.any():
+            return labels
+        labels[dst[take]] = labels[src[take]]
+        left = labels[dst] == 0
+        src, dst = src[left], dst[left]
+
+
+def merge_fragments(
+    labels: I32, adj: FaceAdjacency, areas: F64, min_area: float, merge: bool
+) -> I32:
+    """Merge regions of less area than ``min_area`` into the neighbour they share most edges with.
+
+    A fragment only moves into a neighbour that ranks higher by (area, id), so merges never cycle
+    and the lowest-ranked fragment always moves: each round makes progress. Fragments with no
+    labelled neighbour (all fragments when ``merge`` is off) get label 0.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        areas: Face areas.
+        min_area: Regions under this area are fragments.
+        merge: Whether fragments are merged (else they get label 0).
+
+    Returns:
+        The labels, fragments merged or cleared.
+
+    """
+    labels = labels.copy()
+    if min_area <= 0:
+        return labels
+    while True:
+        sizes = np.bincount(labels, weights=areas, minlength=int(labels.max()) + 1)
+        small = (sizes < min_area) & (np.bincount(labels, minlength=len(sizes)) > 0)
+        small[0] = False
+        if not small.any():
+            return labels
+        a, b = labels[adj.src], labels[adj.dst]
+        cross = (a != b) & small[a] & (b > 0)
+        if not merge or not cross.any():
+            labels[small[labels]] = 0
+            return labels
+        pair, count = np.unique(np.stack([a[cross], b[cross]], axis=1), axis=0, return_counts=True)
+        order = np.lexsort((-count, pair[:, 0]))
+        pair = pair[order]
+        best = np.ones(len(pair), dtype=bool)
+        best[1:] = pair[1:, 0] != pair[:-1, 0]
+        frag, into = pair[best, 0], pair[best, 1]
+        up = (sizes[into] > sizes[frag]) | ((sizes[into] == sizes[frag]) & (into > frag))
+        target = np.arange(len(sizes))
+        target[frag[up]] = into[up]
+        while True:
+            nxt = target[target]
+            if np.array_equal(nxt, target):
+                break
+            target = nxt
+        isolated = small.copy()
+        isolated[pair[:, 0]] = False
+        target[isolated] = 0
+        labels = target[labels].astype(np.int32)
+
+
+def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:
+    """Give label 0 to each region that faces down on the whole and borders no other region.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        lift: Per face, its area times the z component of its normal: a region faces down when
+            the sum over its faces is negative.
+
+    Returns:
+        The labels, such regions cleared.
+
+    """
+    down = np.bincount(labels, weights=lift) < 0
+    down[0] = False
+    a, b = labels[adj.src], labels[adj.dst]
+    down[a[(a != b) & (b > 0)]] = False
+    return np.where(down[labels], 0, labels).astype(np.int32)
+
+
+def _hull_points(points: F64) -> F64:
+    """Return up to ``HULL_SAMPLES`` vertices of the convex hull of ``points``, evenly strided.
+
+    On a smooth rock nearly every vertex is a hull vertex, and Qhull's cost grows with the hull's
+    size: the hull is taken of an even stride of at most ``2 HULL_SAMPLES`` points, and a strided
+    sample of its vertices is returned. Both put the hull within a fraction of an edge length of
+    the full one at a small share of the cost.
+    """
+    points = points[:: -(-len(points) // (2 * HULL_SAMPLES))]
+    with contextlib.suppress(QhullError, ValueError):
+        points = points[ConvexHull(points).vertices]
+    return points[:: -(-len(points) // HULL_SAMPLES)]
+
+
+def _border_depth(union: F64, border: F64, outward: F64, size: float) -> float:
+    try:
+        hull = ConvexHull(union)
+    except (QhullError, ValueError):
+        return float('inf')
+    eq = hull.equations
+    # The median needs no more than a few hundred points of a long border: an even stride of them
+    # keeps the points-by-facets products small.
+    stride = -(-len(border) // BORDER_SAMPLES)
+    border, outward = border[::stride], outward[::stride]
+    # Distance from each border point along its outward normal to where it leaves the hull.
+    gap = -(border @ eq[:, :3].T + eq[:, 3])
+    cos = outward @ eq[:, :3].T
+    with np.errstate(divide='ignore', invalid='ignore'):
+        reach = np.where(cos > 1e-9, np.maximum(gap, 0.0) / cos, np.inf)
+    return float(np.median(reach.min(axis=1))) / size
+
+
+def merge_convex_borders(
+    vertices: F64,
+    geom: FaceGeometry,
+    labels: I32,
+    adj: FaceAdjacency,
+    faces: npt.NDArray[np.int64],
+    max_depth: float,
+    min_edges: int,
+) -> I32:
+    """Join neighbouring regions whose union is convex across their shared border.
+
+    The shared border of two parts of one convex rock lies on the convex hull of their union; the
+    valley where two rocks touch lies under it. The test is the median depth of the border
+    (midpoints of the centroids of the face pairs across it) under the hull of the union's
+    vertices, measured along the border's outward normal, over the square root of the smaller
+    region's area; the shallowest border is joined first and the depths are recomputed after each
+    join.
+
+    Args:
+        vertices: Nx3 vertex positions.
+        geom: Face centroids and areas.
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        faces: Mx3 triangles.
+        max_depth: Borders with a relative depth under this are joined.
+        min_edges: Borders of fewer face edges are left alone.
+
+    Returns:
+        The merged labels (ids are those of the surviving regions).
+
+    """
+    labels = labels.copy()
+    cache: dict[tuple[int, int], float] = {}
+    # Each region's hull vertices, found once: the hull of a union is the hull of theirs.
+    order = np.argsort(labels, kind='stable')
+    bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
+    hulls: dict[int, F64] = {}
+    used = np.zeros(len(vertices), dtype=bool)
+
+    def hull_of(region: int) -> F64:
+        if region not in hulls:
+            # The region's vertices in index order, as np.unique gives them, without a sort.
+            tri = faces[order[bounds[region] : bounds[region + 1]]]
+            used[tri] = True
+            ids = np.flatnonzero(used)
+            used[ids] = False
+            hulls[region] = _hull_points(vertices[ids])
+        return hulls[region]
+
+    while True:
+        a, b = labels[adj.i], labels[adj.j]
+        cross = (a != b) & (a > 0) & (b > 0)
+        lo, hi = np.minimum(a, b)[cross], np.maximum(a, b)[cross]
+        mid = 0.5 * (geom.centroids[adj.i[cross]] + geom.centroids[adj.j[cross]])
+        out = geom.normals[adj.i[cross]] + geom.normals[adj.j[cross]]
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+        area = np.bincount(labels, weights=geom.areas)
+        pairs, inverse, count = np.unique(
+            np.stack([lo, hi], axis=1), axis=0, return_inverse=True, return_counts=True
+        )
+        inverse = inverse.ravel()
+        best, best_depth = -1, max_depth
+        for k in np.flatnonzero(count >= min_edges):
+            key = (int(pairs[k, 0]), int(pairs[k, 1]))
+            if key not in cache:
+                size = float(np.sqrt(min(area[key[0]], area[key[1]])))
+                union = np.concatenate([hull_of(key[0]), hull_of(key[1])])
+                sel = inverse == k
+                cache[key] = _border_depth(union, mid[sel], out[sel], size)
+            if cache[key] < best_depth:
+                best, best_depth = int(k), cache[key]
+        if best < 0:
+            return labels
+        keep, gone = int(pairs[best, 0]), int(pairs[best, 1])
+        hulls[keep] = _hull_points(np.concatenate([hull_of(keep), hull_of(gone)]))
+        labels[labels == gone] = keep
+        cache = {k: d for k, d in cache.items() if keep not in k and gone not in k}

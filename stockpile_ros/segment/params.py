@@ -1,0 +1,299 @@
+"""The segmentation's parameters and the lengths they scale with.
+
+The presets (``paper``, ``default``), every field's scale (median edge lengths of the mesh, or
+multiples of the smallest rock of interest's b), and how that rock's b is found (the class being
+checked, ``segment.min_rock_b`` or the mesh's resolution).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, replace
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..ranges import Range
+from .criterion import PAPER_THRESHOLD
+
+__all__ = [
+    'CLASS_MIN_SHARE',
+    'EDGE_SAMPLES',
+    'RESOLVABLE_EDGES',
+    'Mode',
+    'RockScale',
+    'SegmentParams',
+    'class_min_rock_b',
+    'median_edge',
+    'rock_scale',
+]
+
+
+F64 = npt.NDArray[np.float64]
+
+
+Mode = Literal['paper', 'default']
+
+
+#: Most faces whose edges give the median edge length (an even stride of the mesh's).
+EDGE_SAMPLES = 65536
+
+
+#: The least ``min_rock_edges`` can be set to: a rock under this many median edge lengths across
+#: cannot be told from mesh noise even on a noise-free mesh.
+RESOLVABLE_EDGES = 4.0
+
+
+#: When a class is checked, the smallest rock of interest is this share of the smallest size the
+#: class names (the lower limit of its D15): the rocks under D15 carry 15 % of the mass and must
+#: be counted for D15 to come out right.
+CLASS_MIN_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class SegmentParams:
+    """Every knob of the segmentation. Paper values in brackets; each length says its unit.
+
+    Attributes:
+        mode: Name of the preset these values came from. As a parameter: the preset that gives
+            every other ``segment`` value not set explicitly.
+        threshold: ``t`` of Eq. 2 [0.7; the authors' code used 0.81; 0.93 measured best here: on
+            four reconstructed piles 0.90 merged touching rocks (recall 0.64 on one), 0.95 began
+            to split single rocks].
+        seed_order: ``"index"`` restarts at the lowest-numbered unvisited face [the paper names no
+            order]; ``"convex"`` at the unvisited face whose outgoing edges score highest on average
+            (the authors' code seeded among the most convex faces).
+        normal_smoothing: Rounds of area-weighted averaging of each face normal with its neighbours'
+            before the test [0].
+        exclude_ground: Give faces on the ground plane label 0 and keep them out of the search [no;
+            the authors removed the ground by hand].
+        min_rock_b: Intermediate dimension b of the smallest rock of interest [m]; 0: half the
+            smallest size of the class being checked (the lower limit of its D15) when a class is
+            checked, else ``min_rock_edges`` median edge lengths. Never taken under
+            ``min_rock_edges`` edge lengths.
+        min_rock_edges: The smallest rock a mesh resolves: the smallest rock of interest when
+            neither ``min_rock_b`` nor a class gives it, and its floor when one does [in median
+            edge lengths; at least ``RESOLVABLE_EDGES`` (4)]. On reconstructed meshes the
+            search's pieces of single rocks that no clean-up joins reach about this size
+            (12-55 cm2, square roots of 9-19 edge lengths, on the demo pile): a class-derived
+            ``min_rock_b`` of 12 edge lengths (class I on the demo pile, 3.8 mm edges) took the
+            result from 14 to 18 rocks there even with every other floor; 20 kept 14.
+        ground_tolerance_edges: Height above ``z = 0`` under which a face is ground [in median
+            edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
+            a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
+            bench/bench_scale.py's piles)].
+        ground_min_nz: Smallest normal z component of a ground face (0: any face that does not
+            face down; the skirt Poisson puts round the foot of a rock slopes).
+        min_region_share: Regions of less area than this share of the plan area of the smallest
+            rock of interest (a disc of diameter ``min_rock_b``) are fragments; 0 keeps every
+            region [in units of ``pi / 4 min_rock_b^2``] [0; the authors' code dropped regions
+            under 1 % of all faces, a rule that caps a pile at about 100 rocks]. 1: a rock of
+            interest shows at least its plan area unless it is mostly hidden. On reconstructed
+            piles the pieces of single rocks that survive the convex join are up to about that
+            size: with 0.25 the demo pile gave 24 rocks for 14 (12 false, every one on a true
+            rock, 13-170 cm2) and one of 12 rocks gave 30; 0.5 gave 15 and 17, 1.0 14 and 14
+            (2 and 3 false), 1.5 and 2 the same. On bench/bench_scale.py's coarse pile (150 rocks
+            of 11-22 edge lengths across) discs of 10 to 20 edge lengths across lost no rock
+            (1.0 of the default 20 edges: recall/precision 0.986/0.989 on coarse, 0.990/0.992 on
+            many, as with 0.25), discs of 28 and 30 lost 32 and 45.
+        merge_fragments: Merge fragments into the neighbouring region they share the most edges
+            with; when off, or when a fragment has no neighbour, it gets label 0 [off].
+        drop_facing_down: Give label 0 to a region that borders no other region (only ground)
+            and whose area-weighted mean normal points down [off]: the cameras look down on a
+            pile, so a rock standing alone on the ground shows its top; a lone region facing down
+            is an underside or overhang cut off from its rock by a gap in the mesh. On two
+            reconstructed piles such regions (2047 faces, median normal z -0.19, on a 12-rock
+            pile; 1224 faces, -0.29, on an 11-rock one) were reported as false rocks. Regions
+            facing down that border others are left alone: on bench/bench_scale.py's many pile,
+            merging those into a neighbour too gave 123 segments for 150 rocks (precision 0.81).
+        merge_convex: After the fragment merge, join neighbouring regions whose union is convex
+            across their shared border (see ``merge_convex_borders``) [off]: on a
+            reconstructed mesh, noise stops the search inside single rocks.
+        border_depth: Largest median depth of the shared border under the convex hull of the
+            union (along the border's outward normal), for a join [in units of the square root
+            of the smaller region's area]. On four reconstructed piles 0.12 joined every split
+            rock and no touching rocks; 0.16 began to join touching rocks, 0.05 left splits.
+        border_min_edges: Borders shorter than this many face edges are never joined (a corner
+            contact says little about the surface between the regions).
+        valley_depth_ratio: Faces whose vertices lie deeper than this under their smoothed
+            surroundings are valley faces, kept out of the search and handed back to the regions
+            they border afterwards; 0 disables [in units of the valley radius, a crease angle:
+            0.067 is the 0.5 mm at 7.5 mm measured on reconstructed piles] [0]. On seven
+            reconstructed piles (79 matched rocks) 0.5 mm took recall from 0.86 to 0.90, the
+            median b error from 7.0 % to 5.4 % and the mean D50 error from 9.8 % to 4.3 %; 0.3 mm
+            and 0.7 mm did worse on b or D50.
+        valley_radius_b: Scale of the smoothed surroundings: the standard deviation of the
+            smoothing kernel [in units of ``min_rock_b``; on reconstructed piles (depth-9 meshes,
+            4-5 mm edges) 7.5 mm, about 1.5 edge lengths, measured as well as 5 and 10 mm: 0.075
+            keeps it there when ``min_rock_b`` comes from the mesh]. A crease is only seen at a
+            scale wider than the rounding Poisson gave it, and the crevices between larger rocks
+            are wider. Never under ``valley_min_edges`` edge lengths.
+        valley_min_edges: Floor of the valley radius [in median edge lengths]. On flat ground of
+            three reconstructed piles (3.8, 2.0, 2.35 mm edges) the depth under the smoothed
+            surface grows with the radius up to about 3 edge lengths (the noise of the dense
+            points is correlated over a few cells) and then levels off near 0.15 edge lengths,
+            while the valley depth threshold keeps growing with the radius: 11-17 % of the flat
+            faces read as valley at 1 edge length, 9-15 % at 1.5, 4-6 % at 3, 2-5 % at 4, where
+            the threshold clears the 95th percentile of the flat ground's depth. On the 12-rock
+            pile of 2.0 mm edges, 1.5 edge lengths (those of a 20-edge rock of interest) left 3
+            false rocks, 2.5 to 4 left 1; on the demo pile, 3 joined two touching rocks (D50
+            +8 %), 2.5 and 4 did not, and 4 found one rock more (recall 0.93 against 0.86). The
+            7.5 mm of the absolute rule were 2 and 3.7 edge lengths on those two piles.
+        split_depth_ratio: Faces deeper than this under their surroundings at the scale
+            ``split_radius_b`` cut a region; where they cut it into two or more parts of at
+            least ``split_min_share`` of its area each, the parts become regions of their own (see
+            ``split_at_valleys``); 0 disables [in units of the split radius] [0]. On twelve
+            reconstructed piles 1 mm at 15 mm split one region, two touching rocks joined through
+            a gap in the narrower valley (recall 0.905 -> 0.912, median b error 5.1 % -> 4.8 %,
+            worst D50 error 16.4 % -> 6.9 %); 0.8 mm and 1.3 mm measured the same or better,
+            0.6 mm began to split single rocks.
+        split_radius_b: Scale of the surroundings for ``split_depth_ratio`` [in units of
+            ``min_rock_b``; 0.15 is the 15 mm (3 edge lengths) measured on reconstructed piles
+            when ``min_rock_b`` comes from the mesh]. Never under ``split_min_edges`` edge lengths.
+        split_min_edges: Floor of the split radius [in median edge lengths; twice
+            ``valley_min_edges``, as ``split_radius_b`` is twice ``valley_radius_b``].
+        split_min_share: Smallest share of a region's area that a part needs to be split off
+            (0.2 measured the same as 0.1).
+
+    """
+
+    mode: Mode = 'default'
+    threshold: Annotated[float, Range(-1.0, 2.0)] = 0.93
+    seed_order: Literal['index', 'convex'] = 'convex'
+    normal_smoothing: Annotated[int, Range(0, 100)] = 0
+    exclude_ground: bool = True
+    min_rock_b: Annotated[float, Range(0.0, 100.0)] = 0.0
+    min_rock_edges: Annotated[float, Range(RESOLVABLE_EDGES, 10_000.0)] = 20.0
+    ground_tolerance_edges: Annotated[float, Range(0.0, 1000.0)] = 2.0
+    ground_min_nz: Annotated[float, Range(0.0, 1.0)] = 0.0
+    min_region_share: Annotated[float, Range(0.0, 100.0)] = 1.0
+    merge_fragments: bool = True
+    drop_facing_down: bool = True
+    merge_convex: bool = True
+    border_depth: Annotated[float, Range(0.0, 10.0)] = 0.12
+    border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
+    valley_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
+    valley_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.075
+    valley_min_edges: Annotated[float, Range(0.0, 100.0)] = 4.0
+    split_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
+    split_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.15
+    split_min_edges: Annotated[float, Range(0.0, 100.0)] = 8.0
+    split_min_share: Annotated[float, Range(0.0, 0.5)] = 0.1
+
+    @classmethod
+    def paper(cls) -> SegmentParams:
+        """Return the published rule: ``t = 0.7``, face normals, index-order seeds, no clean-up."""
+        return cls(
+            mode='paper',
+            threshold=PAPER_THRESHOLD,
+            seed_order='index',
+            normal_smoothing=0,
+            exclude_ground=False,
+            min_region_share=0.0,
+            merge_fragments=False,
+            drop_facing_down=False,
+            merge_convex=False,
+            valley_depth_ratio=0.0,
+            split_depth_ratio=0.0,
+        )
+
+    @classmethod
+    def preset(cls, mode: Mode, **overrides: Any) -> SegmentParams:
+        """Return the ``mode`` preset with some fields replaced (``None`` values are ignored)."""
+        base = cls.paper() if mode == 'paper' else cls()
+        return replace(base, **{k: v for k, v in overrides.items() if v is not None})
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict for report.json."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RockScale:
+    """The lengths a segmentation was measured against.
+
+    Attributes:
+        edge: Median edge length of the mesh [m] (0 when every edge is degenerate).
+        min_rock_b: Intermediate dimension b of the smallest rock of interest [m].
+        source: Where ``min_rock_b`` came from: ``"parameter"``, ``"class"`` or ``"mesh"``.
+        requested: The smallest rock of interest asked for [m]; ``min_rock_b`` is larger when
+            the mesh does not resolve it (see ``SegmentParams.min_rock_edges``).
+        valley_radius: Scale of the valley faces (``SegmentParams.valley_radius_b``) [m].
+        split_radius: Scale of the valleys that split a region (``split_radius_b``) [m].
+
+    """
+
+    edge: float
+    min_rock_b: float
+    source: Literal['parameter', 'class', 'mesh']
+    requested: float
+    valley_radius: float
+    split_radius: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict for report.json."""
+        return asdict(self)
+
+
+def median_edge(vertices: F64, faces: npt.NDArray[np.int64]) -> float:
+    """Median length of the mesh's face edges, degenerate (zero-length) edges left out [m].
+
+    Returns:
+        The median, 0 when the mesh has no edge of non-zero length.
+
+    """
+    # An even stride of faces gives the median of a million-face mesh to a fraction of a percent
+    # at a small share of the cost; the same faces are picked whatever the mesh's size in metres.
+    tri = vertices[faces[:: max(1, -(-len(faces) // EDGE_SAMPLES))]]
+    length = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).ravel()
+    length = length[length > 0]
+    return float(np.median(length)) if len(length) else 0.0
+
+
+def class_min_rock_b(spec: Mapping[str, Any]) -> float | None:
+    """Smallest rock of interest for checking a class: half its smallest lower size limit.
+
+    Args:
+        spec: A class entry of the class table (``limits`` in metres, see ``check_class``).
+
+    Returns:
+        ``CLASS_MIN_SHARE`` times the smallest lower limit [m], None when the class has none.
+
+    """
+    lows = [float(lo) for lo, _ in spec.get('limits', {}).values() if lo is not None]
+    return CLASS_MIN_SHARE * min(lows) if lows else None
+
+
+def rock_scale(
+    params: SegmentParams, edge: float, spec: Mapping[str, Any] | None = None
+) -> RockScale:
+    """Return the smallest rock of interest: ``min_rock_b``, else the class's, else the mesh's.
+
+    Args:
+        params: ``min_rock_b`` (0: not given) and ``min_rock_edges``.
+        edge: The mesh's median edge length [m].
+        spec: The class being checked, or None.
+
+    Returns:
+        The scale; ``min_rock_b`` is never under ``min_rock_edges`` edge lengths, the valley and
+        split radii never under ``valley_min_edges`` and ``split_min_edges``.
+
+    """
+    floor = params.min_rock_edges * edge
+    source: Literal['parameter', 'class', 'mesh'] = 'mesh'
+    requested = floor
+    from_class = class_min_rock_b(spec) if spec is not None else None
+    if params.min_rock_b > 0:
+        source, requested = 'parameter', params.min_rock_b
+    elif from_class is not None:
+        source, requested = 'class', from_class
+    b = max(requested, floor)
+    return RockScale(
+        edge,
+        b,
+        source,
+        requested,
+        max(params.valley_radius_b * b, params.valley_min_edges * edge),
+        max(params.split_radius_b * b, params.split_min_edges * edge),
+    )
