@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .cloud.mesh import cloud_segment_params
 from .errors import CaptureError, StockpileError
 from .meshcheck import read_mesh
 from .recon.keyframes import KeyframeStore
@@ -143,7 +144,8 @@ def run_segmentation(
         options = report_options(settings.values)
         analysis = analyse_mesh(
             mesh.vertices, mesh.faces, mesh.colors,
-            seg_params=settings.segment, measure_params=settings.measure,
+            seg_params=cloud_segment_params(settings.segment, info, settings.explicit),
+            measure_params=settings.measure,
             spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
             report_options=options,
         )  # fmt: skip

@@ -67,6 +67,8 @@ def _reconstruction_warnings(info: dict[str, Any]) -> list[str]:
     rejected = (info.get('scale_details') or {}).get('odometry', {}).get('rejected')
     if rejected:
         out.append(f'Odometry was not used for the scale: {rejected}.')
+    # What reading and meshing a point cloud dropped or guessed (stockpile_ros.cloud).
+    out += list((info.get('cloud') or {}).get('warnings', []))
     return out
 
 

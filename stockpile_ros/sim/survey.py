@@ -1,0 +1,152 @@
+"""A simulated survey cloud of a pile (terrestrial or phone LiDAR), with its truth folder.
+
+The pile is the simulator's (:func:`~.pile.build_pile`); the cloud samples its visible union
+surface (:func:`~stockpile_ros.segment.synthetic.sample_scene`) as seen from a ring of scanner
+positions and one overhead, uniformly in area at a chosen spacing, with Gaussian range noise,
+then moves it into a survey frame (tilted, far from the origin as georeferenced coordinates are)
+so that the levelling and the float precision are tested too. The truth (``truth.json``,
+``scene.ply``) stays in the pile's frame, ``pile``; ``survey_to_pile`` maps the cloud back.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+from ..evaluation import evaluate_sides, load_result, load_truth
+from ..geometry import Similarity
+from ..segment.gradation import gradation
+from ..segment.synthetic import sample_scene
+from .pile import PileConfig, build_pile
+from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
+
+__all__ = ['Survey', 'score_survey', 'simulate_survey']
+
+F64 = npt.NDArray[np.float64]
+
+# Uniform random samples (a 2-D Poisson process) of density n have a mean nearest-neighbour
+# distance of 0.5 / sqrt(n).
+_NN_FACTOR = 0.5
+
+
+@dataclass(frozen=True)
+class Survey:
+    """A simulated survey.
+
+    Attributes:
+        points: Nx3 points in the survey frame.
+        normals: Nx3 true unit normals (survey frame).
+        labels: N true labels (0 ground, else the rock id).
+        survey_to_pile: Maps survey coordinates into the truth frame.
+        truth: The ``truth.json`` dict.
+
+    """
+
+    points: F64
+    normals: F64
+    labels: npt.NDArray[np.int32]
+    survey_to_pile: Similarity
+    truth: dict[str, Any]
+
+
+def simulate_survey(
+    out: str | Path,
+    pile: PileConfig,
+    *,
+    seed: int = 0,
+    spacing: float = 0.01,
+    noise: float = 0.002,
+    tilt_deg: float = 10.0,
+    offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
+) -> Survey:
+    """Build a pile, write its truth folder into ``out`` and return a survey cloud of it.
+
+    Args:
+        out: Truth folder (created).
+        pile: The pile.
+        seed: Random seed of the pile, the samples and the noise.
+        spacing: Mean distance between neighbouring points [m].
+        noise: Standard deviation of the range noise, along each point's normal [m].
+        tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
+        offset: Where the pile's origin lies in the survey frame [m].
+
+    """
+    rng = np.random.default_rng(seed)
+    rocks = build_pile(rng, pile)
+    reach = max(float(np.abs(r.mesh.vertices[:, :2]).max()) for r in rocks)
+    ground_half = reach + 0.5
+    scene = scene_mesh(rocks, ground_half)
+    ring = np.radians(np.arange(0.0, 360.0, 45.0))
+    eyes = np.column_stack([2.5 * reach * np.cos(ring), 2.5 * reach * np.sin(ring),
+                            np.full(len(ring), 1.5)])  # fmt: skip
+    eyes = np.vstack([eyes, [[0.0, 0.0, 3.0 * reach]]])
+    density = (_NN_FACTOR / spacing) ** 2
+    sampled = sample_scene(scene.vertices, scene.faces, scene.labels, density, margin=0.3,
+                           seed=seed, viewpoints=eyes)  # fmt: skip
+    counts = np.bincount(sampled.labels, minlength=max(r.id for r in rocks) + 1)
+    truths = []
+    for rock in rocks:
+        record = rock_truth(rock, 0.0)
+        record['visible_fraction'] = min(1.0, float(counts[rock.id]) / (record['area'] * density))
+        truths.append(record)
+    truth = {
+        'schema': TRUTH_SCHEMA,
+        'units': 'm',
+        'frame_id': 'pile',
+        'seed': seed,
+        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'tilt_deg': tilt_deg,
+                             'rocks': pile.rocks, 'gradation': pile.gradation.as_dict()}},
+        'cameras': [],
+        'target': None,
+        'specific_gravity': SPECIFIC_GRAVITY,
+        'rocks': truths,
+        'gradation': gradation([r['b'] for r in truths], [r['mass'] for r in truths]),
+    }  # fmt: skip
+    write_truth(out, truth, scene)
+    points = sampled.points + rng.normal(0.0, noise, len(sampled.points))[:, None] * sampled.normals
+    axis = rng.normal(size=3)
+    axis[2] = 0.0
+    axis /= np.linalg.norm(axis)
+    rotation = Rotation.from_rotvec(np.radians(tilt_deg) * axis).as_matrix()
+    shift = np.asarray(offset, dtype=np.float64)
+    to_pile = Similarity(1.0, rotation.T, -rotation.T @ shift)
+    return Survey(
+        points=points @ rotation.T + shift,
+        normals=sampled.normals @ rotation.T,
+        labels=sampled.labels,
+        survey_to_pile=to_pile,
+        truth=truth,
+    )
+
+
+def score_survey(result_dir: str | Path, truth_dir: str | Path, survey: Survey) -> dict[str, Any]:
+    """Score a result made from a survey cloud against its truth (:func:`~.evaluation.evaluate`).
+
+    A cloud has no keyframes to align by: the result is moved back into the survey frame with the
+    transform the run itself recorded (``report.json``'s ``mesh.model_to_stockpile``), then into
+    the truth frame with ``survey.survey_to_pile``.
+    """
+    result = load_result(result_dir)
+    report = json.loads((Path(result_dir) / 'report.json').read_text())
+    m = report['mesh']['model_to_stockpile']
+    rotation = np.asarray(m['rotation'], dtype=np.float64).reshape(3, 3)
+    scale, shift = float(m['scale']), np.asarray(m['translation'], dtype=np.float64)
+    to = survey.survey_to_pile
+
+    def back(points: F64) -> F64:
+        # x_stockpile = scale R x_survey + t, with x_survey in the cloud's units (metres here).
+        return to.apply(((points - shift) @ rotation) / scale * float(report['scale'][
+            'metres_per_unit']))  # fmt: skip
+
+    result.mesh.vertices = back(result.mesh.vertices)
+    for rock in result.rocks.values():
+        if rock.centroid is not None:
+            rock.centroid = back(rock.centroid.reshape(1, 3))[0]
+    result.frame_id = str(survey.truth['frame_id'])
+    return evaluate_sides(result, load_truth(truth_dir))
