@@ -4,18 +4,18 @@ Up is given (``cloud.up``) or the normal of the cloud's trend plane: a robust le
 over every point (Tukey's biweight, iteratively reweighted from the plain fit), so that on a pile
 with ground around it the ground wins and on a grain-covered bar, which has no bare ground, the
 bar's trend does. No single patch of ground is looked for. The plane's sign: the side most given
-normals point to; else the input's +z when the normal is within 60 degrees of it (surveys and
-most tools write z up); else the side the surface stands out towards (rocks rise from a bed).
+normals point to; else the side the surface bulges towards over most of its area (rocks are
+convex and the valleys between them narrow; a tool's frame may have any axis up, as
+Structure-from-Motion ones do); else the input's +z.
 z = 0 is the plane moved down to a low percentile of the heights: the ground where some shows,
 the bottom of the gaps between grains where none does, so that the surface lies above it.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from ..errors import StockpileError
 from ..geometry import Similarity
@@ -31,7 +31,11 @@ _MAD = 1.4826
 _ITERATIONS = 30
 # More points than this add nothing to a plane's three parameters but time.
 _PLANE_SAMPLE = 200_000
-_Z_CONE = math.cos(math.radians(60.0))
+# How far from half the share of bulging points must be to tell the sides apart, and the points
+# (sampled) and neighbourhoods (points) that share is taken over.
+_CONVEX_MARGIN = 0.05
+_CONVEX_SAMPLE = 20_000
+_CONVEX_NEIGHBOURS = 50
 
 
 def parse_up(text: str) -> F64 | None:
@@ -86,11 +90,23 @@ def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F6
         side = float(np.mean(normals @ normal > 0))
         if side != 0.5:
             return (normal if side > 0.5 else -normal), 'the side most given normals face'
-    if abs(normal[2]) >= _Z_CONE:
-        return (normal if normal[2] > 0 else -normal), "the input's +z"
-    heights = (points - centre) @ normal
-    skew = float(np.mean((heights - heights.mean()) ** 3))
-    return (normal if skew >= 0 else -normal), 'the side the surface stands out towards'
+    bulging = _bulging_share(points, normal, rng)
+    if abs(bulging - 0.5) >= _CONVEX_MARGIN:
+        return (normal if bulging > 0.5 else -normal), 'the side the surface bulges towards'
+    return (normal if normal[2] >= 0 else -normal), "the input's +z (no side bulges)"
+
+
+def _bulging_share(points: F64, normal: F64, rng: np.random.Generator) -> float:
+    """Share of points higher along ``normal`` than the mean of their nearest points.
+
+    Rocks are convex: over most of a pile's or a bed's surface it bends away from the side it is
+    seen from, and the valleys between them are narrow.
+    """
+    picks = rng.choice(len(points), min(len(points), _CONVEX_SAMPLE), replace=False)
+    heights = points @ normal
+    _, near = cKDTree(points).query(points[picks], k=min(len(points), _CONVEX_NEIGHBOURS))
+    bulge = heights[picks] - heights[near].mean(axis=1)
+    return float(np.mean(bulge > 0))
 
 
 def level_transform(

@@ -92,15 +92,16 @@ class CloudOptions:
 def point_spacing(points: F64, seed: int = 0) -> tuple[float, F64]:
     """Median distance to the nearest other point, and every point's such distance.
 
-    Repeated points (distance 0) are left out of the median, which they would pull to nothing.
+    Repeated points count once: they would pull the spacing to nothing.
     """
-    tree = cKDTree(points)
-    dist, _ = tree.query(points, k=2)
+    unique, inverse = np.unique(points, axis=0, return_inverse=True)
+    if len(unique) < 2:
+        return 0.0, np.zeros(len(points))
+    dist, _ = cKDTree(unique).query(unique, k=2)
     nearest = np.asarray(dist[:, 1], dtype=np.float64)
     rng = np.random.default_rng(seed)
     sample = nearest if len(nearest) <= _SPACING_SAMPLE else rng.choice(nearest, _SPACING_SAMPLE)
-    positive = sample[sample > 0]
-    return (float(np.median(positive)) if len(positive) else 0.0), nearest
+    return float(np.median(sample)), np.asarray(nearest[np.ravel(inverse)])
 
 
 def poisson_depth(extent: float, spacing: float, cell_spacings: float, max_depth: int) -> int:

@@ -19,14 +19,17 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from .. import messages as m
+from ..bagio.writer import BagWriter
 from ..evaluation import evaluate_sides, load_result, load_truth
 from ..geometry import Similarity
+from ..outputs import pointcloud2
 from ..segment.gradation import gradation
 from ..segment.synthetic import sample_scene
 from .pile import PileConfig, build_pile
 from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
 
-__all__ = ['Survey', 'score_survey', 'simulate_survey']
+__all__ = ['Survey', 'score_survey', 'simulate_survey', 'write_scan_bag']
 
 F64 = npt.NDArray[np.float64]
 
@@ -125,24 +128,30 @@ def simulate_survey(
     )
 
 
-def score_survey(result_dir: str | Path, truth_dir: str | Path, survey: Survey) -> dict[str, Any]:
+def score_survey(
+    result_dir: str | Path,
+    truth_dir: str | Path,
+    survey: Survey,
+    mesh_info: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Score a result made from a survey cloud against its truth (:func:`~.evaluation.evaluate`).
 
-    A cloud has no keyframes to align by: the result is moved back into the survey frame with the
-    transform the run itself recorded (``report.json``'s ``mesh.model_to_stockpile``), then into
-    the truth frame with ``survey.survey_to_pile``.
+    A cloud has no keyframes to align by: the result is moved back into the cloud's frame with the
+    transform the run itself recorded (``model_to_stockpile`` of ``mesh_info``, the run's
+    ``mesh.json``, or of ``report.json``'s ``mesh``), then into the truth frame with
+    ``survey.survey_to_pile``.
     """
     result = load_result(result_dir)
     report = json.loads((Path(result_dir) / 'report.json').read_text())
-    m = report['mesh']['model_to_stockpile']
-    rotation = np.asarray(m['rotation'], dtype=np.float64).reshape(3, 3)
-    scale, shift = float(m['scale']), np.asarray(m['translation'], dtype=np.float64)
+    record = (mesh_info or report['mesh'])['model_to_stockpile']
+    rotation = np.asarray(record['rotation'], dtype=np.float64).reshape(3, 3)
+    scale, shift = float(record['scale']), np.asarray(record['translation'], dtype=np.float64)
+    metres = float(report['scale']['metres_per_unit'])
     to = survey.survey_to_pile
 
     def back(points: F64) -> F64:
-        # x_stockpile = scale R x_survey + t, with x_survey in the cloud's units (metres here).
-        return to.apply(((points - shift) @ rotation) / scale * float(report['scale'][
-            'metres_per_unit']))  # fmt: skip
+        # x_stockpile = scale R x_cloud + t, with x_cloud in the cloud's units.
+        return to.apply(((points - shift) @ rotation) / scale * metres)
 
     result.mesh.vertices = back(result.mesh.vertices)
     for rock in result.rocks.values():
@@ -150,3 +159,51 @@ def score_survey(result_dir: str | Path, truth_dir: str | Path, survey: Survey) 
             rock.centroid = back(rock.centroid.reshape(1, 3))[0]
     result.frame_id = str(survey.truth['frame_id'])
     return evaluate_sides(result, load_truth(truth_dir))
+
+
+def write_scan_bag(
+    bag: str | Path, survey: Survey, *, scans: int = 16, height: float = 1.5, seed: int = 0
+) -> Path:
+    """Write a cart circling the pile with a LiDAR on a mast scanning ``survey``, as a ROS 2 bag.
+
+    The survey must be in the pile's frame (``tilt_deg=0``, ``offset`` zero): that frame is the
+    odometry frame ``odom``. Each point goes to one scan among those whose sensor it faces (every
+    point once: a real sensor samples new places each sweep), in the sensor frame ``lidar_link``.
+    Topics: ``/points`` (PointCloud2, x, y, z), ``/odom`` and ``/tf`` (``odom`` -> ``base_link``,
+    ten poses a scan) and ``/tf_static`` (``base_link`` -> ``lidar_link``: up the mast, turned
+    and pitched towards the pile).
+    """
+    rng = np.random.default_rng(seed)
+    points = survey.points
+    radius = 1.3 * float(np.max(np.linalg.norm(points[:, :2], axis=1)))
+    mount = Rotation.from_euler('zy', [0.0, 30.0], degrees=True)
+    steps = 10
+    angles = np.linspace(0.0, 2 * np.pi, scans * steps, endpoint=False)
+    bases = np.column_stack(
+        [radius * np.cos(angles), radius * np.sin(angles), np.zeros(len(angles))]
+    )
+    yaws = Rotation.from_euler('z', (angles + np.pi)[:, None])
+    sensors = bases[::steps] + np.array([0.0, 0.0, height])
+    facing = np.einsum('sij,ij->is', sensors[:, None, :] - points[None], survey.normals) > 0
+    weights = facing / np.maximum(facing.sum(axis=1, keepdims=True), 1)
+    cumulative = np.cumsum(weights, axis=1)
+    owner = (cumulative < rng.random(len(points))[:, None]).sum(axis=1)
+    owner[~facing.any(axis=1)] = -1
+    start = 1_000_000_000
+    with BagWriter(Path(bag)) as writer:
+        f = writer.factory
+        static = m.transform_stamped(f, start, 'base_link', 'lidar_link', [0.0, 0.0, height],
+                                     mount.as_quat())  # fmt: skip
+        writer.write('/tf_static', m.tf_message(f, [static]), start)
+        for k, (base, yaw) in enumerate(zip(bases, yaws, strict=True)):
+            t = start + k * 10_000_000
+            quat = yaw.as_quat()
+            writer.write('/odom', m.odometry(f, t, base, quat), t)
+            tf = m.transform_stamped(f, t, 'odom', 'base_link', base, quat)
+            writer.write('/tf', m.tf_message(f, [tf]), t)
+            if k % steps == 0:
+                to_lidar = (yaw * mount).inv()
+                seen = points[owner == k // steps] - sensors[k // steps]
+                cloud = pointcloud2(f, to_lidar.apply(seen), None, None, t, 'lidar_link')
+                writer.write('/points', cloud, t)
+    return Path(bag)
