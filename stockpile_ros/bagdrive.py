@@ -220,7 +220,7 @@ def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) 
         Counts: frames seen, keyframes held (in total and new), decisions by reason.
 
     Raises:
-        CaptureError: No keyframe was kept.
+        CaptureError: No keyframe was kept, or the bag has no camera (a point cloud only).
 
     """
     f = RosbagsFactory(typestore())
@@ -235,7 +235,14 @@ def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) 
 
     stats = ReadStats()
     with BagReader(bag) as reader:
-        drive(reader, bag_inputs(reader, topic), selector, publish, stats)
+        inputs = bag_inputs(reader, topic, settings.cloud.topic)
+        if inputs.image is None:
+            raise CaptureError(
+                'keyframes',
+                f'{bag} has no camera topic, only the point cloud {inputs.cloud}',
+                'Replay it (stockpile replay), which meshes the cloud',
+            )
+        drive(reader, inputs, selector, publish, stats)
     state = selector.collector.state
     count = held.held.keyframes
     if count == 0:

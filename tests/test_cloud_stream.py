@@ -14,6 +14,7 @@ from stockpile_ros import messages as m
 from stockpile_ros.bagdrive import bag_inputs
 from stockpile_ros.bagio.reader import BagReader
 from stockpile_ros.bagio.writer import BagWriter
+from stockpile_ros.cli import main
 from stockpile_ros.cloud.accumulate import CloudAccumulator
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.messages import RosbagsFactory
@@ -92,7 +93,7 @@ def test_a_fixed_sensor_without_odometry_and_thinning() -> None:
     assert cloud.points[:, :2].min() < 0.03 and cloud.points[:, :2].max() > 0.95
 
 
-def test_bag_inputs_find_the_cloud(tmp_path: Path) -> None:
+def test_bag_inputs_find_the_cloud(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / 'bag'
     with BagWriter(bag) as writer:
         f = writer.factory
@@ -108,6 +109,9 @@ def test_bag_inputs_find_the_cloud(tmp_path: Path) -> None:
         assert bag_inputs(reader, cloud_topic='lidar/points').cloud == '/lidar/points'
         with pytest.raises(StockpileError, match=r'cloud\.topic'):
             bag_inputs(reader, cloud_topic='points')
+    # Structure-from-Motion needs a camera: the reason and the way out, not an empty run.
+    assert main(['reconstruct', str(bag), '--work', str(tmp_path / 'work')]) == 2
+    assert 'stockpile replay' in capsys.readouterr().err
 
 
 def test_a_lidar_bag_replays_to_a_metric_result(tmp_path: Path) -> None:
