@@ -124,7 +124,7 @@ def bag_inputs(reader: BagReader, topic: str | None = None, cloud_topic: str = '
     cloud = _cloud_topic(reader, cloud_topic)
     if topic is None and not images and cloud is None:
         raise StockpileError(
-            f'{reader.path}: no Image, CompressedImage or PointCloud2 topic to replay'
+            f'{reader.path}: no Image or CompressedImage topic (nor a PointCloud2) to replay'
         )
     image = topic or (images[0] if images else None)
     if image is not None and image not in images:
