@@ -164,3 +164,31 @@ def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-unty
     report = json.loads((out / 'report.json').read_text())
     assert report['units'] == 'm' and report['scale']['method'] == 'input units'
     assert len(report['rocks']) > 10
+
+
+def test_a_foreign_mesh_is_levelled_only_when_up_is_given(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from segment_fixtures import height_field
+
+    from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+
+    def bumps(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        # Two boulders on flat ground: convex, with a sharp crease where they meet it.
+        z = np.zeros_like(x)
+        for cx, cy, r in ((0.1, 0.0, 0.15), (-0.2, 0.2, 0.1)):
+            z = np.maximum(z, np.sqrt(np.clip(r**2 - (x - cx) ** 2 - (y - cy) ** 2, 0, None)))
+        return z
+
+    v, f = height_field(bumps, 0.5, 60)
+    tilt = Rotation.from_rotvec([0.3, 0.0, 0.0]).as_matrix()
+    path = tmp_path / 'other_tool.ply'
+    write_labelled_mesh(path, LabelledMesh(v @ tilt.T + [0, 0, 50.0], f,
+                                           np.zeros(len(f), dtype=np.int32)))  # fmt: skip
+    kept, levelled = tmp_path / 'kept', tmp_path / 'levelled'
+    assert main(['segment', str(path), '--out', str(kept), '--units', 'm']) == 0
+    assert 'model_to_stockpile' not in json.loads((kept / 'report.json').read_text())['mesh']
+    assert main(['segment', str(path), '--out', str(levelled), '--units', 'm', '--up', 'fit']) == 0
+    report = json.loads((levelled / 'report.json').read_text())
+    rotation = np.asarray(report['mesh']['model_to_stockpile']['rotation']).reshape(3, 3)
+    assert rotation[2] @ (tilt @ [0.0, 0.0, 1.0]) > 0.999
+    z = read_labelled_mesh(levelled / 'segments.ply').vertices[:, 2]
+    assert np.percentile(z, 1) == pytest.approx(0.0, abs=1e-3) and z.max() < 0.15

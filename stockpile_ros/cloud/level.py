@@ -36,6 +36,7 @@ _PLANE_SAMPLE = 200_000
 _CONVEX_MARGIN = 0.05
 _CONVEX_SAMPLE = 20_000
 _CONVEX_NEIGHBOURS = 50
+_FLAT = 1e-9
 
 
 def parse_up(text: str) -> F64 | None:
@@ -103,10 +104,13 @@ def _bulging_share(points: F64, normal: F64, rng: np.random.Generator) -> float:
     seen from, and the valleys between them are narrow.
     """
     picks = rng.choice(len(points), min(len(points), _CONVEX_SAMPLE), replace=False)
-    heights = points @ normal
+    heights = (points - points.mean(axis=0)) @ normal
     _, near = cKDTree(points).query(points[picks], k=min(len(points), _CONVEX_NEIGHBOURS))
     bulge = heights[picks] - heights[near].mean(axis=1)
-    return float(np.mean(bulge > 0))
+    # Flat parts (within rounding of the cloud's size) bend neither way: they do not vote.
+    flat = np.abs(bulge) <= _FLAT * float(np.ptp(heights))
+    votes = bulge[~flat]
+    return float(np.mean(votes > 0)) if len(votes) else 0.5
 
 
 def level_transform(
