@@ -39,6 +39,9 @@ setup(
         'matplotlib>=3.7',
         'PyYAML>=6',
         'jinja2>=3.1',
+        # Survey clouds in: LAS and, through the lazrs backend, LAZ (stockpile segment, cloud/).
+        'laspy>=2.5',
+        'lazrs>=0.5',
     ],
     extras_require={
         # mcap: an independent reader to check the MCAP files we write (chunks, channel metadata).

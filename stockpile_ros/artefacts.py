@@ -52,6 +52,7 @@ __all__ = [
     'MeshInfo',
     'ModelImages',
     'OdometryEntry',
+    'ScaleMethod',
     'ScaleRecord',
     'SimilarityRecord',
     'SparseSummary',
@@ -64,7 +65,9 @@ __all__ = [
 ]
 
 T = TypeVar('T')
-ScaleMethod = Literal['target', 'odometry', 'target+odometry', 'given', 'input units', 'none']
+ScaleMethod = Literal[
+    'target', 'odometry', 'target+odometry', 'given', 'input units', 'sensor', 'none'
+]
 
 
 class ArtefactError(StockpileError):
@@ -333,6 +336,12 @@ class SimilarityRecord:
     rotation: list[float] = field(default_factory=lambda: [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0])
     translation: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
+    @classmethod
+    def of(cls, sim: Similarity) -> SimilarityRecord:
+        """Return the record of a transform."""
+        return cls(float(sim.scale), [float(v) for v in np.ravel(sim.rotation)],
+                   [float(v) for v in sim.translation])  # fmt: skip
+
     def similarity(self) -> Similarity:
         """Return the transform, to apply."""
         rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
@@ -372,7 +381,8 @@ class MeshInfo:
         keyframes: The registered keyframes' cameras in ``frame_id``.
         keyframes_off_path: Keyframes left out (see ``dense.json``).
         poisson: Poisson surface parameters and what trimming left.
-        source: What the surface was made from, in words (empty: this work folder's keyframes).
+        cloud: How a point cloud was read, levelled and meshed into it (``docs/formats.md``);
+            None for a surface made from the keyframes.
 
     """
 
@@ -387,7 +397,7 @@ class MeshInfo:
     keyframes: list[KeyframePose] = field(default_factory=list)
     keyframes_off_path: list[str] = field(default_factory=list)
     poisson: dict[str, Any] = field(default_factory=dict)
-    source: str = ''
+    cloud: dict[str, Any] | None = None
     schema: str = SCHEMA
 
     def __post_init__(self) -> None:

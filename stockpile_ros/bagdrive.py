@@ -2,7 +2,9 @@
 
 Both ``stockpile replay`` and the keyframe stage of ``stockpile reconstruct BAG`` go this way, so
 a bag gives the keyframes (odometry interpolated, camera from the CameraInfo of the stamp) that
-the keyframe node would have sent live.
+the keyframe node would have sent live. A bag's PointCloud2 topic, with the odometry and the
+transforms, goes to the reconstruction component as the live topics would (it accumulates the
+cloud); a bag may hold a cloud and no camera.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from .artefacts import KeyframeSummary, WorkFolder
 from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
@@ -27,12 +29,35 @@ from .ros.publications import Publication
 from .ros.typestore import typestore
 from .settings import Settings
 
-__all__ = ['BagInputs', 'bag_inputs', 'collect_keyframes', 'drive', 'keyframes_from_bag']
+__all__ = [
+    'BagInputs',
+    'CloudSink',
+    'bag_inputs',
+    'collect_keyframes',
+    'drive',
+    'keyframes_from_bag',
+]
 
 _INFO = 'sensor_msgs/msg/CameraInfo'
 _TF = 'tf2_msgs/msg/TFMessage'
 _EMPTY = 'std_msgs/msg/Empty'
 _ODOMETRY = 'nav_msgs/msg/Odometry'
+_CLOUD = 'sensor_msgs/msg/PointCloud2'
+# The node set's own PointCloud2 outputs (a replay.mcap replayed again) are no sensor's.
+_OWN_PREFIX = '/stockpile/'
+
+
+class CloudSink(Protocol):
+    """What takes a bag's point clouds: the reconstruction component."""
+
+    def on_cloud(self, msg: Any, log_ns: int) -> list[Publication]:
+        """One PointCloud2."""
+
+    def on_odometry(self, msg: Any, log_ns: int) -> list[Publication]:
+        """One odometry sample."""
+
+    def on_tf(self, msg: Any, static: bool, log_ns: int) -> list[Publication]:
+        """One TFMessage."""
 
 
 @dataclass(frozen=True)
@@ -40,24 +65,29 @@ class BagInputs:
     """The topics of a bag that feed the node set.
 
     Attributes:
-        image: The camera topic.
+        image: The camera topic, None when the bag has none (then it has a cloud).
         info: Its CameraInfo topic, None when the bag has none.
         odometry: The odometry topic, None when the bag has none.
         tf: ``/tf`` and ``/tf_static`` where the bag has them.
         triggers: Recorded triggers (``std_msgs/Empty`` on the trigger topic).
+        cloud: The PointCloud2 topic (``cloud.topic``), None when the bag has none.
 
     """
 
-    image: str
+    image: str | None
     info: str | None
     odometry: str | None
     tf: tuple[str, ...]
     triggers: tuple[str, ...]
+    cloud: str | None = None
 
     def routes(self) -> dict[str, str]:
         """Return what each topic is, by name."""
         out = {t: t for t in self.tf} | {t: 'trigger' for t in self.triggers}
-        out[self.image] = 'image'
+        if self.image:
+            out[self.image] = 'image'
+        if self.cloud:
+            out[self.cloud] = 'cloud'
         if self.info:
             out[self.info] = 'info'
         if self.odometry:
@@ -65,26 +95,52 @@ class BagInputs:
         return out
 
 
-def bag_inputs(reader: BagReader, topic: str | None = None) -> BagInputs:
+def _cloud_topic(reader: BagReader, wanted: str) -> str | None:
+    """Return the PointCloud2 topic ``wanted`` ('' the one with most messages, ours left out)."""
+    clouds = [t for t, _ in reader.topics_of([_CLOUD]) if not t.startswith(_OWN_PREFIX)]
+    if not wanted:
+        return clouds[0] if clouds else None
+    named = topics.absolute(wanted)
+    if named not in clouds:
+        raise StockpileError(
+            f'parameter cloud.topic: {wanted} is not a PointCloud2 topic of {reader.path} '
+            f'(PointCloud2 topics: {", ".join(clouds) or "none"})'
+        )
+    return named
+
+
+def bag_inputs(reader: BagReader, topic: str | None = None, cloud_topic: str = '') -> BagInputs:
     """Find a bag's inputs; ``topic`` picks the camera (default: the one with most messages).
 
+    Args:
+        reader: The open bag.
+        topic: The image topic, None for the one with most messages.
+        cloud_topic: The PointCloud2 topic (``cloud.topic``), '' for the one with most messages.
+
     Raises:
-        StockpileError: No image topic, or ``topic`` is not one.
+        StockpileError: Neither an image topic nor a PointCloud2 topic, or ``topic`` or
+            ``cloud_topic`` is not one.
 
     """
     images = reader.image_topics()
-    if topic is None and not images:
-        raise StockpileError(f'{reader.path}: no Image or CompressedImage topic to replay')
-    image = topic or images[0]
-    if image not in images:
+    cloud = _cloud_topic(reader, cloud_topic)
+    if topic is None and not images and cloud is None:
+        raise StockpileError(
+            f'{reader.path}: no Image or CompressedImage topic (nor a PointCloud2) to replay'
+        )
+    image = topic or (images[0] if images else None)
+    if image is not None and image not in images:
         raise StockpileError(
             f'{image} is not an image topic of {reader.path} (image topics: '
             f'{", ".join(images) or "none"})'
         )
     odometry = [t for t, _ in reader.topics_of([_ODOMETRY])]
     return BagInputs(
+        cloud=cloud,
         image=image,
-        info=camera_info_topic_for(image, [t for t, _ in reader.topics_of([_INFO])]),
+        info=camera_info_topic_for(image, [t for t, _ in reader.topics_of([_INFO])])
+        if image
+        else None,
         odometry=odometry[0] if odometry else None,
         tf=tuple(t for t, _ in reader.topics_of([_TF]) if t in (topics.TF, topics.TF_STATIC)),
         triggers=tuple(
@@ -102,8 +158,9 @@ def drive(
     *,
     on_trigger: Callable[[int], None] | None = None,
     on_input: Callable[[str, Any, int], None] | None = None,
+    clouds: CloudSink | None = None,
 ) -> int:
-    """Feed the bag's inputs to ``keyframes`` in bag order.
+    """Feed the bag's inputs to ``keyframes`` (and its clouds to ``clouds``) in bag order.
 
     Args:
         reader: The open bag.
@@ -113,6 +170,8 @@ def drive(
         stats: Read statistics (skipped messages and why).
         on_trigger: Called at each recorded trigger with its log time.
         on_input: Called with every input message before it is fed (to record it).
+        clouds: Takes the point clouds, the odometry and the transforms too (None: the clouds
+            are not read).
 
     Returns:
         The last message's log time.
@@ -136,10 +195,18 @@ def drive(
             publish(log_ns, keyframes.on_image(msg, log_ns))
         elif route == 'info':
             publish(log_ns, keyframes.on_camera_info(msg, log_ns))
+        elif route == 'cloud':
+            if clouds is not None:
+                publish(log_ns, clouds.on_cloud(msg, log_ns))
         elif route == 'odometry':
             publish(log_ns, keyframes.on_odometry(msg, log_ns))
+            if clouds is not None:
+                publish(log_ns, clouds.on_odometry(msg, log_ns))
         else:
-            publish(log_ns, keyframes.on_tf(msg, route == topics.TF_STATIC, log_ns))
+            static = route == topics.TF_STATIC
+            publish(log_ns, keyframes.on_tf(msg, static, log_ns))
+            if clouds is not None:
+                publish(log_ns, clouds.on_tf(msg, static, log_ns))
     # The end of the recording: nothing more will complete the keyframes still waiting.
     publish(last_ns, keyframes.flush(last_ns))
     return last_ns
@@ -155,7 +222,7 @@ def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) 
         Counts: frames seen, keyframes held (in total and new), decisions by reason.
 
     Raises:
-        CaptureError: No keyframe was kept.
+        CaptureError: No keyframe was kept, or the bag has no camera (a point cloud only).
 
     """
     f = RosbagsFactory(typestore())
@@ -170,7 +237,14 @@ def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) 
 
     stats = ReadStats()
     with BagReader(bag) as reader:
-        drive(reader, bag_inputs(reader, topic), selector, publish, stats)
+        inputs = bag_inputs(reader, topic, settings.cloud.topic)
+        if inputs.image is None:
+            raise CaptureError(
+                'keyframes',
+                f'{bag} has no camera topic, only the point cloud {inputs.cloud}',
+                'Replay it (stockpile replay), which meshes the cloud',
+            )
+        drive(reader, inputs, selector, publish, stats)
     state = selector.collector.state
     count = held.held.keyframes
     if count == 0:

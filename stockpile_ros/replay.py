@@ -1,13 +1,14 @@
 """Replay a recorded bag through the components of the node set: a bag driver, nothing more.
 
 The bag's camera, camera info, odometry and transforms go, in bag order, into the same
-:class:`~stockpile_ros.components.KeyframeComponent` the keyframe node runs; what each component
-publishes is written into an MCAP bag and handed, as the very same message, to the components
-that subscribe to it in the topic table (keyframes to the reconstruction, the surface to the
-segmentation), as DDS would between the nodes. The reconstruction runs at every recorded trigger
-(``std_msgs/Empty`` on the trigger topic), on its own after ``auto_trigger_keyframes``, or once at
-the end of a bag that has no trigger. The input topics are written too (original stamps) so that
-Foxglove shows the camera; results carry the stamp of their trigger.
+:class:`~stockpile_ros.components.KeyframeComponent` the keyframe node runs (a PointCloud2 topic,
+the odometry and the transforms into the reconstruction component, which accumulates the cloud);
+what each component publishes is written into an MCAP bag and handed, as the very same message, to
+the components that subscribe to it in the topic table (keyframes to the reconstruction, the surface
+to the segmentation), as DDS would between the nodes. The reconstruction runs at every recorded
+trigger (``std_msgs/Empty`` on the trigger topic), on its own after ``auto_trigger_keyframes``, or
+once at the end of a bag that has no trigger. The input topics are written too (original stamps) so
+that Foxglove shows the camera; results carry the stamp of their trigger.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ class ReplaySummary:
 
     Attributes:
         bag: The input bag.
-        image_topic: The camera topic replayed.
+        image_topic: The camera topic replayed ('' when the bag has none).
+        cloud_topic: The PointCloud2 topic replayed ('' when the bag has none).
         frames: Frames decoded and offered to the collector.
         skipped: Image messages that could not be used.
         keyframes: Keyframes held at the last trigger.
@@ -62,6 +64,7 @@ class ReplaySummary:
 
     bag: Path
     image_topic: str
+    cloud_topic: str = ''
     frames: int = 0
     skipped: int = 0
     keyframes: int = 0
@@ -216,7 +219,7 @@ def replay(
     settings = dataclasses.replace(settings, work_dir=out_dir / 'work')
     # The bag is opened first: one that is not a bag is refused before a folder is claimed.
     with BagReader(bag) as reader:
-        inputs = bag_inputs(reader, topic)
+        inputs = bag_inputs(reader, topic, settings.cloud.topic)
         with claim(out_dir, Path(bag), settings.values, resume=resume, fresh=fresh) as run:
             summary = _replay(reader, inputs, out_dir, settings)
             if not summary.ok:
@@ -228,7 +231,8 @@ def _replay(
     reader: BagReader, inputs: BagInputs, out_dir: Path, settings: Settings
 ) -> ReplaySummary:
     output_bag = out_dir / 'replay.mcap'
-    summary = ReplaySummary(bag=reader.path, image_topic=inputs.image, work_dir=settings.work_dir,
+    summary = ReplaySummary(bag=reader.path, image_topic=inputs.image or '',
+                            cloud_topic=inputs.cloud or '', work_dir=settings.work_dir,
                             result_dir=out_dir / 'result', output_bag=output_bag)  # fmt: skip
     partial = output_bag.with_name(output_bag.name + PARTIAL_SUFFIX)
     for stale in (output_bag, partial):
@@ -248,7 +252,8 @@ def _replay(
 
         try:
             last_ns = drive(reader, inputs, rig.keyframes, rig.publish, stats,
-                            on_trigger=rig.reconstruct, on_input=passthrough)  # fmt: skip
+                            on_trigger=rig.reconstruct, on_input=passthrough,
+                            clouds=rig.reconstruction)  # fmt: skip
             rig.finish(last_ns)
         except KeyboardInterrupt:
             rig.interrupted()

@@ -11,10 +11,17 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from .artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
+import numpy as np
+import numpy.typing as npt
+
+from .artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load, save
+from .cloud.mesh import cloud_segment_params, mesh_cloud
+from .cloud.read import Cloud
 from .errors import CaptureError, StockpileError
 from .meshcheck import read_mesh
+from .meshio import write_labelled_mesh
 from .recon.keyframes import KeyframeStore
 from .recon.pipeline import reconstruct
 from .segment.pipeline import Analysis, analyse_mesh
@@ -23,7 +30,14 @@ from .segment.qa import report_options
 from .segment.report import write_result_folder
 from .settings import Settings, class_spec, defaults
 
-__all__ = ['MIN_KEYFRAMES', 'RECON_STAGES', 'Outcome', 'run_reconstruction', 'run_segmentation']
+__all__ = [
+    'MIN_KEYFRAMES',
+    'RECON_STAGES',
+    'Outcome',
+    'run_cloud_reconstruction',
+    'run_reconstruction',
+    'run_segmentation',
+]
 
 RECON_STAGES = ('sfm', 'dense', 'mesh')
 
@@ -126,6 +140,64 @@ def run_reconstruction(
     return outcome
 
 
+def run_cloud_reconstruction(
+    settings: Settings,
+    cloud: Cloud,
+    viewpoints: npt.NDArray[np.float64] | None,
+    on_stage: Callable[[str, int, float | None], None] | None = None,
+    stream: dict[str, Any] | None = None,
+) -> Outcome:
+    """Mesh an accumulated sensor cloud (metres, its frame the model frame) into the work folder.
+
+    Writes ``dense/dense.ply`` (the cloud) and ``dense.json``, then ``mesh/mesh.ply`` and
+    ``mesh.json`` (scale method ``sensor``: a range sensor measures metres) as the mesh stage of
+    :func:`run_reconstruction` would, so that everything downstream reads the same files.
+
+    Args:
+        settings: Options and work folder.
+        cloud: The accumulated cloud.
+        viewpoints: Per point, a place towards the sensor that saw it (normals turn that way).
+        on_stage: As for :func:`run_reconstruction`.
+        stream: What the accumulation saw, kept in ``mesh.json`` as ``cloud.stream``.
+
+    Returns:
+        The outcome of the one stage, ``mesh``, with what it made.
+
+    """
+    import open3d
+
+    o3d: Any = open3d
+    outcome = Outcome(ok=True, stage='mesh')
+    work = WorkFolder(settings.work_dir)
+    if on_stage is not None:
+        on_stage('mesh', RECON_STAGES.index('mesh'), None)
+    start = time.perf_counter()
+    try:
+        mesh, info = mesh_cloud(cloud, settings.cloud, settings.recon.poisson, 1.0, 'sensor',
+                                viewpoints)  # fmt: skip
+        if stream is not None and info.cloud is not None:
+            info.cloud['stream'] = stream
+        work.dense.mkdir(parents=True, exist_ok=True)
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
+        if cloud.colors is not None:
+            pcd.colors = o3d.utility.Vector3dVector(cloud.colors / 255.0)
+        o3d.io.write_point_cloud(work.dense / 'dense.ply', pcd)
+        dense = DenseSummary(
+            'sensor cloud', False, len(cloud.points), extra={'source': cloud.source}
+        )
+        save(dense, work.dense / 'dense.json')
+        work.mesh.mkdir(parents=True, exist_ok=True)
+        write_labelled_mesh(work.mesh / 'mesh.ply', mesh)
+        save(info, work.mesh / 'mesh.json')
+    except _FAILURES as exc:
+        return _failure('mesh', exc, outcome)
+    outcome.dense, outcome.mesh = dense, info
+    outcome.seconds['mesh'] = time.perf_counter() - start
+    if on_stage is not None:
+        on_stage('mesh', RECON_STAGES.index('mesh'), outcome.seconds['mesh'])
+    return outcome
+
+
 def run_segmentation(
     settings: Settings,
     mesh_dir: Path,
@@ -156,7 +228,8 @@ def run_segmentation(
         options = report_options(settings.values)
         analysis = analyse_mesh(
             mesh.vertices, mesh.faces, mesh.colors,
-            seg_params=settings.segment, measure_params=settings.measure,
+            seg_params=cloud_segment_params(settings.segment, info, settings.explicit),
+            measure_params=settings.measure,
             spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
             report_options=options,
         )  # fmt: skip

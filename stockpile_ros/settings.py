@@ -28,6 +28,8 @@ from typing import Annotated, Any, Literal, TypeAlias
 
 import yaml
 
+from .cloud.level import parse_up
+from .cloud.mesh import CloudOptions
 from .errors import StockpileError
 from .ranges import Range
 from .recon.dense import DenseOptions
@@ -172,7 +174,10 @@ class Setting:
 _SKIP = {'recon.topic', 'recon.selector', 'recon.sfm', 'recon.dense', 'recon.poisson'}
 
 # Strings whose content is checked beyond their type when they are loaded.
-_TEXT_CHECKS: dict[str, Callable[[str], object]] = {'recon.target': parse_targets}
+_TEXT_CHECKS: dict[str, Callable[[str], object]] = {
+    'recon.target': parse_targets,
+    'cloud.up': parse_up,
+}
 
 
 def _attribute_docs(cls: type) -> dict[str, str]:
@@ -251,6 +256,7 @@ def _table() -> tuple[Setting, ...]:
     shared = ('recon.use_odometry', 'recon.max_image_pixels')
     rows += [dataclasses.replace(r, nodes=kf + rc) if r.name in shared else r
              for r in _from_dataclass('recon', ReconOptions, rc)]  # fmt: skip
+    rows += _from_dataclass('cloud', CloudOptions, rc)
     rows += _from_dataclass('segment', SegmentParams, sg)
     rows += _from_dataclass('measure', MeasureParams, sg)
     rows += _from_dataclass('report', ReportOptions, sg)
@@ -318,6 +324,7 @@ class Settings:
             ``segment`` values as the preset of ``segment.mode`` and the explicit ones give them.
         explicit: Names of the parameters that were set explicitly.
         recon: Options of the reconstruction stages (keyframe selection included).
+        cloud: How a point cloud becomes the mesh (a file, or a PointCloud2 stream).
         segment: Segmentation parameters.
         measure: Measurement parameters.
         work_dir: Work folder.
@@ -330,6 +337,7 @@ class Settings:
     values: dict[str, Value]
     explicit: frozenset[str]
     recon: ReconOptions
+    cloud: CloudOptions
     segment: SegmentParams
     measure: MeasureParams
     work_dir: Path
@@ -403,6 +411,7 @@ def build_settings(
         values=values,
         explicit=named,
         recon=options,
+        cloud=CloudOptions(**_group(values, 'cloud')),  # type: ignore[arg-type]
         segment=segment,
         measure=MeasureParams(**_group(values, 'measure')),  # type: ignore[arg-type]
         work_dir=Path(str(values['work_dir'])),

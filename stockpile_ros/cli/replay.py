@@ -53,8 +53,16 @@ def _print_summary(s: ReplaySummary) -> None:
     for line in s.problems:
         print(f'stockpile replay: {line}', file=sys.stderr)
     calib = 'CameraInfo' if s.camera_info else 'self-calibrated (no usable CameraInfo)'
-    print(f'{s.bag}: {s.frames} frames of {s.image_topic} ({s.skipped} skipped), '
-          f'{s.keyframes} keyframes, coverage {s.coverage:.2f}, intrinsics {calib}')  # fmt: skip
+    if s.image_topic:
+        print(f'{s.bag}: {s.frames} frames of {s.image_topic} ({s.skipped} skipped), '
+              f'{s.keyframes} keyframes, coverage {s.coverage:.2f}, '
+              f'intrinsics {calib}')  # fmt: skip
+    cloud = s.recon.mesh.cloud if s.recon and s.recon.mesh else None
+    if s.cloud_topic and cloud:
+        stream = cloud.get('stream', {})
+        print(f'{s.bag}: {stream.get("placed")} of {stream.get("messages")} point clouds of '
+              f'{s.cloud_topic} placed in {stream.get("frame_id")}, {cloud["points_used"]} points '
+              f'meshed (spacing {cloud["spacing"]:.3g} m)')  # fmt: skip
     sfm = s.recon.sparse if s.recon else None
     if sfm:
         print(f'registered {sfm.registered}/{s.keyframes} keyframes, '

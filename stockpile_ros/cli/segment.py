@@ -1,4 +1,4 @@
-"""``stockpile segment``: rocks out of a stockpile mesh, with the result folder."""
+"""``stockpile segment``: rocks out of a stockpile mesh or point cloud, with the result folder."""
 
 from __future__ import annotations
 
@@ -6,26 +6,47 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..artefacts import MeshInfo, ScaleRecord, load
+from ..artefacts import MeshInfo, ScaleMethod, ScaleRecord, SimilarityRecord, load, to_json
+from ..cloud import (
+    cloud_segment_params,
+    is_mesh_file,
+    level_transform,
+    mesh_cloud,
+    parse_up,
+    read_cloud,
+    trend_up,
+)
 from ..errors import StockpileError
-from ..meshcheck import UNITS, read_mesh
+from ..meshcheck import UNITS, MeshCheck, check_mesh, read_mesh
+from ..meshio import LabelledMesh
 from ..segment.pipeline import analyse_mesh
 from ..segment.provenance import Provenance
 from ..segment.qa import report_options
 from ..segment.report import write_result_folder
-from ..settings import class_spec, defaults, write_effective
+from ..settings import Settings, class_spec, defaults, write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 
-DESCRIPTION = """Segment a stockpile mesh (metric, z up, ground at z = 0) into rocks with the
-curvature search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass,
+DESCRIPTION = """Segment a stockpile mesh (metric, z up, ground at z = 0) or a point cloud into
+rocks with the curvature search of the paper (Eq. 2), measure each rock (a, b, c, ESD, volume, mass,
 sphericity...) and the pile's gradation, optionally check it against a riprap class, and write the
 result folder:
 report.json, segments.ply, rocks.csv, gradation.png, render.png, keyframe.png (a keyframe photo
 with the rocks outlined, when the keyframes/ folder of the work folder is beside the mesh's
 folder), index.html and report.pdf. The verdict against a class is PASS, FAIL or UNDECIDED (a
 confidence interval straddles a limit); without a metric scale no class is checked.
+
+Inputs: a mesh (PLY or OBJ with faces: this project's, taken as it is, or another tool's,
+levelled like a cloud when --up is given) or a point cloud (PLY without faces, OBJ vertices,
+LAS/LAZ, XYZ/CSV/TXT columns x y z [nx ny nz] [r g b] with an optional header), with or without
+normals and colours. A cloud is levelled (up from --up, else the normal of its robust trend plane:
+no bare ground is needed), its normals estimated where missing, and Poisson-meshed at a depth
+whose finest cell is about the point spacing (cloud.* parameters); its smallest rock is
+cloud.min_rock_spacings point spacings (in place of the 20-edge floor below, which is what a mesh
+from photos resolves). Units: LAS/LAZ coordinates
+are taken as metres (scale method "input units"), other files as model units (no metres, no
+verdict) unless --units names their unit (scale method "given").
 
 Modes: "paper" is the published rule (t = 0.7, face normals, no clean-up); "default" keeps the
 ground and the valleys at the scale of the smallest rock of interest out of the search, uses
@@ -53,12 +74,16 @@ _ALIASES = (
           metavar='CLASS'),
     Alias('--class-table', 'gradation.class_table',
           'class table YAML (default config/riprap_classes.yaml)', metavar='FILE'),
+    Alias('--up', 'cloud.up', 'up in the input frame, x,y,z, or fit (the robust trend plane); '
+          'a cloud is always levelled, a mesh only when this is given', metavar='X,Y,Z|fit'),
 )  # fmt: skip
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add this subcommand's arguments."""
-    parser.add_argument('mesh', type=Path, help='mesh PLY (e.g. RECON/mesh/mesh.ply)')
+    parser.add_argument('mesh', type=Path, metavar='INPUT',
+                        help='mesh (e.g. RECON/mesh/mesh.ply, or OBJ) or point cloud (PLY, '
+                        'LAS, LAZ, XYZ, CSV, TXT)')  # fmt: skip
     parser.add_argument('--out', type=Path, required=True, help='result folder to write')
     parser.add_argument(
         '--mesh-info', type=Path, help='mesh.json of the reconstruction (scale, keyframes)'
@@ -66,35 +91,96 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--units',
         choices=list(UNITS),
-        help='length unit of the mesh coordinates, scaled to metres (default: metres; a mesh '
+        help='length unit of the input coordinates, scaled to metres (default: metres; a mesh '
         'whose size is implausible in metres is refused unless its units are given). Without '
         '--mesh-info the result is in model units (no metres, no class verdict) unless the '
-        'units are given here (scale method "given")',
+        'units are given here (scale method "given") or the input is LAS/LAZ (survey '
+        'coordinates, taken as metres: scale method "input units")',
     )
     add_parameter_arguments(parser, _ALIASES)
+
+
+def _from_cloud(
+    args: argparse.Namespace, settings: Settings
+) -> tuple[LabelledMesh, MeshCheck, MeshInfo]:
+    """Read and mesh a point cloud file; returns the mesh, its check and what it is."""
+    cloud = read_cloud(args.mesh)
+    method: ScaleMethod
+    if args.units is not None:
+        metres, method = UNITS[args.units], 'given'
+    elif cloud.format in ('las', 'laz'):
+        # A survey format: its coordinates are in the units of its reference system.
+        metres, method = 1.0, 'input units'
+    else:
+        metres, method = 1.0, 'none'
+    mesh, info = mesh_cloud(cloud, settings.cloud, settings.recon.poisson, metres, method)
+    mesh, check = check_mesh(mesh, args.mesh)
+    c, p = info.cloud or {}, info.poisson
+    unit = 'm' if method != 'none' else 'model units'
+    print(f'cloud: {c["points_used"]} points, spacing {c["spacing"]:.3g} {unit}, up '
+          f'{c["up"]["tilt_deg"]:.1f} deg from the input z, Poisson depth {p["depth"]} -> '
+          f'{p["faces"]} faces')  # fmt: skip
+    if method == 'none':
+        print('stockpile segment: note: no --units: sizes in model units (pass --units m if the '
+              'coordinates are metres)', file=sys.stderr)  # fmt: skip
+    elif not check.plausible:
+        raise StockpileError(f'{check.warnings[-1]}; pass the right --units')
+    return mesh, check, info
+
+
+def _level(mesh: LabelledMesh, settings: Settings, info: MeshInfo) -> None:
+    """Level a foreign mesh as a cloud would be (:mod:`stockpile_ros.cloud.level`), in place."""
+    up = parse_up(settings.cloud.up)
+    if up is None:
+        up, _ = trend_up(mesh.vertices)
+    sim, plane = level_transform(mesh.vertices, up, 1.0, settings.cloud.ground_percentile)
+    mesh.vertices = sim.apply(mesh.vertices)
+    info.ground_plane_model = [float(v) for v in plane]
+    info.model_to_stockpile = SimilarityRecord.of(sim)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     settings = settings_from_args(args)
-    mesh, check = read_mesh(args.mesh, args.units or 'm')
-    if not check.plausible and args.units is None:
-        hint = f' --units {check.likely_units}' if check.likely_units else ' --units'
-        raise StockpileError(
-            f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
-        )
-    info = None if args.mesh_info is None else load(MeshInfo, args.mesh_info)
-    if info is None and args.units is not None:
-        # The user vouches for the mesh's units: metric, though no target or odometry says so.
-        info = MeshInfo(ScaleRecord('given', UNITS[args.units]), units='m')
+    info: MeshInfo | None
+    if not is_mesh_file(args.mesh):
+        if args.mesh_info is not None:
+            raise StockpileError('--mesh-info goes with a mesh; a point cloud is meshed here')
+        mesh, check, info = _from_cloud(args, settings)
+    else:
+        mesh, check = read_mesh(args.mesh, args.units or 'm')
+        if not check.plausible and args.units is None:
+            hint = f' --units {check.likely_units}' if check.likely_units else ' --units'
+            raise StockpileError(
+                f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
+            )
+        info = None if args.mesh_info is None else load(MeshInfo, args.mesh_info)
+        if info is None and args.units is not None:
+            # The user vouches for the mesh's units: metric, though no target or odometry says so.
+            info = MeshInfo(ScaleRecord('given', UNITS[args.units]), units='m')
+        if 'cloud.up' in settings.explicit:
+            if args.mesh_info is not None:
+                raise StockpileError('--up levels a foreign mesh; this one is levelled already '
+                                     '(its --mesh-info has model_to_stockpile)')  # fmt: skip
+            info = info or MeshInfo()
+            _level(mesh, settings, info)
     spec = class_spec(settings)
     options = report_options(settings.values)
     analysis = analyse_mesh(
         mesh.vertices, mesh.faces, mesh.colors,
-        seg_params=settings.segment, measure_params=settings.measure,
+        seg_params=cloud_segment_params(settings.segment, info, settings.explicit),
+        measure_params=settings.measure,
         spec=spec, mesh_info=info, source=str(args.mesh), report_options=options,
     )  # fmt: skip
     analysis.report['mesh']['check'] = check.as_dict()
+    if info is not None and (info.cloud is not None or 'cloud.up' in settings.explicit):
+        # How a cloud or a foreign mesh was levelled and meshed: the way back to its frame.
+        made = {
+            'cloud': info.cloud,
+            'poisson': info.poisson,
+            'model_to_stockpile': info.model_to_stockpile,
+        }
+        analysis.report['mesh'].update({k: to_json(v) for k, v in made.items() if v})
     analysis.report['warnings'][:0] = check.warnings
     provenance = Provenance.for_input(args.mesh, settings.values, defaults())
     keyframes = args.mesh.resolve().parent.parent / 'keyframes'

@@ -1,10 +1,13 @@
 """The reconstruction component: keyframes in; on a trigger sfm, dense, mesh; the surface out.
 
 Keyframes arrive as ``Keyframe`` messages and are written into this component's own work folder,
-so it needs nothing from the keyframe node's disk. A run publishes, in this order: one
-``RECONSTRUCTING`` status per stage, the stages' diagnostics, then either a ``FAILED`` status or
-the dense cloud, the mesh markers, the stockpile frame on ``/tf_static``, a ``SEGMENTING``
-status and the ``SurfaceMesh`` for the segmentation.
+so it needs nothing from the keyframe node's disk. A ``PointCloud2`` stream (a depth camera, a
+LiDAR) is accumulated in the odometry frame as it comes (:mod:`stockpile_ros.cloud.accumulate`,
+with the odometry and ``/tf`` it needs); a run meshes that cloud instead of running
+Structure-from-Motion when ``cloud.source`` says so (``auto``: clouds arrived, no keyframe
+held). A run publishes, in this order: one ``RECONSTRUCTING`` status per stage, the stages'
+diagnostics, then either a ``FAILED`` status or the dense cloud, the mesh markers, the stockpile
+frame on ``/tf_static``, a ``SEGMENTING`` status and the ``SurfaceMesh`` for the segmentation.
 """
 
 from __future__ import annotations
@@ -14,13 +17,16 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ..artefacts import WorkFolder
+from scipy.spatial.transform import Rotation
+
+from ..artefacts import MeshInfo, WorkFolder
+from ..cloud.accumulate import CloudAccumulator
 from ..recon.collector import CollectorState
 from ..recon.keyframes import KeyframeStore
 from ..ros import topics
 from ..ros.convert import CameraInfoError
 from ..ros.images import ImageError
-from ..ros.messages import MessageFactory
+from ..ros.messages import MessageFactory, tf_message, transform_stamped
 from ..ros.publications import (
     Publication,
     diagnostics,
@@ -28,7 +34,7 @@ from ..ros.publications import (
     reconstruction_outputs,
     status,
 )
-from ..runner import RECON_STAGES, Outcome, run_reconstruction
+from ..runner import RECON_STAGES, Outcome, run_cloud_reconstruction, run_reconstruction
 from ..settings import Settings
 from .handoff import read_keyframe, surface_message
 
@@ -58,6 +64,9 @@ class ReconstructionComponent:
         self._auto_started = False
         self._held = threading.Condition()
         self._stamps = {r.stamp_ns for r in self.store.records}
+        self.clouds = CloudAccumulator(settings.cloud.max_points)
+        self._cloud_lock = threading.Lock()
+        self._noted: set[str] = set()
 
     @property
     def held(self) -> CollectorState:
@@ -78,6 +87,54 @@ class ReconstructionComponent:
                 self._stamps.add(received.frame.stamp_ns)
             self._held.notify_all()
         return []
+
+    def on_cloud(self, msg: Any, log_ns: int) -> list[Publication]:
+        """Accumulate one ``PointCloud2``; a diagnostic, once per reason, when it is unusable."""
+        with self._cloud_lock:
+            reason = self.clouds.on_cloud(msg, log_ns)
+        if reason is None or reason in self._noted:
+            return []
+        self._noted.add(reason)
+        return [diagnostics(self.f, log_ns, 'cloud', 'ERROR', f'point cloud skipped: {reason}')]
+
+    def on_odometry(self, msg: Any, log_ns: int) -> list[Publication]:
+        """Keep the odometry that places the clouds."""
+        with self._cloud_lock:
+            self.clouds.on_odometry(msg, log_ns)
+        return []
+
+    def on_tf(self, msg: Any, static: bool, log_ns: int) -> list[Publication]:
+        """Keep the transforms that place the clouds (the sensor's mount on the cart)."""
+        with self._cloud_lock:
+            self.clouds.on_tf(msg, static, log_ns)
+        return []
+
+    def uses_cloud(self, settings: Settings) -> bool:
+        """Whether a run now meshes the accumulated cloud rather than the keyframes."""
+        source = settings.cloud.source
+        if source == 'auto':
+            return self.clouds.received and not self.store.records
+        return source == 'cloud'
+
+    def _run_cloud(
+        self, settings: Settings, on_stage: Callable[[str, int, float | None], None]
+    ) -> Outcome:
+        with self._cloud_lock:
+            cloud, viewpoints = self.clouds.cloud(settings.cloud.topic or topics.CLOUD)
+            c = self.clouds.counts
+            stream = {'frame_id': self.clouds.frame_id, 'messages': c.messages,
+                      'placed': c.placed, 'unplaced': c.unplaced, 'bad': sum(c.bad.values()),
+                      'thinned': c.thinned}  # fmt: skip
+        return run_cloud_reconstruction(settings, cloud, viewpoints, on_stage, stream)
+
+    def _stockpile_frame(self, stamp_ns: int, info: MeshInfo) -> list[Publication]:
+        """``/tf_static``: the stockpile frame in the cloud's frame (the levelling, inverted)."""
+        sim = info.model_to_stockpile.similarity()
+        position = -sim.rotation.T @ sim.translation / sim.scale
+        quat = Rotation.from_matrix(sim.rotation.T).as_quat()
+        frame = self.clouds.frame_id or 'odom'
+        transform = transform_stamped(self.f, stamp_ns, frame, 'stockpile', position, quat)
+        return [(topics.TF_STATIC, tf_message(self.f, [transform]))]
 
     def on_keyframe_status(self, msg: Any) -> bool:
         """Track what the keyframe node reports; return True when it is time to auto-trigger."""
@@ -127,7 +184,10 @@ class ReconstructionComponent:
                 emit([status(f, stamp_ns, 'RECONSTRUCTING', stage, held, f'running {stage}',
                              progress=progress)])  # fmt: skip
 
-        outcome = run_reconstruction(settings, on_stage)
+        cloud = self.uses_cloud(settings)
+        outcome = (
+            self._run_cloud(settings, on_stage) if cloud else run_reconstruction(settings, on_stage)
+        )
         emit(reconstruction_diagnostics(f, stamp_ns, outcome))
         if not outcome.ok:
             emit([status(f, stamp_ns, 'FAILED', outcome.stage, held, outcome.reason,
@@ -136,6 +196,8 @@ class ReconstructionComponent:
         frame_id = settings.frame_id
         max_faces = int(settings.values['display_max_faces'])
         emit(reconstruction_outputs(f, stamp_ns, self.work.root, frame_id, max_faces))
+        if cloud and outcome.mesh is not None:
+            emit(self._stockpile_frame(stamp_ns, outcome.mesh))
         surface = surface_message(f, self.work.mesh, stamp_ns, frame_id, held.keyframes,
                                   held.coverage)  # fmt: skip
         # The status first: the segmentation's own statuses follow the surface.

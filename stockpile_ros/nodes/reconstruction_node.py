@@ -1,4 +1,8 @@
-"""Reconstruction node: keyframes in; on a trigger sfm, dense and mesh run in a worker thread."""
+"""Reconstruction node: keyframes in; on a trigger sfm, dense and mesh run in a worker thread.
+
+It also accumulates a PointCloud2 stream (``points``) in the odometry frame, with the odometry
+and the transforms that place it, and meshes that cloud instead when ``cloud.source`` says so.
+"""
 
 from __future__ import annotations
 
@@ -44,6 +48,10 @@ class ReconstructionNode(Node):
         subscribe(self, topics.TRIGGER, self.on_trigger, MutuallyExclusiveCallbackGroup())
         subscribe(self, topics.KEYFRAMES, self.on_keyframe)
         subscribe(self, topics.KEYFRAME_STATUS, self.on_keyframe_status)
+        subscribe(self, topics.CLOUD, self.on_cloud)
+        subscribe(self, topics.ODOMETRY, self.on_odometry)
+        subscribe(self, topics.TF, self.on_tf)
+        subscribe(self, topics.TF_STATIC, self.on_tf_static)
 
     def start(self, why: str) -> tuple[bool, str]:
         """Start a run in the worker thread unless one is running; return whether and why."""
@@ -67,6 +75,22 @@ class ReconstructionNode(Node):
     def on_keyframe(self, msg: Any) -> None:
         """Store the keyframe in this node's work folder."""
         self.pubs.publish(self.component.on_keyframe(msg, now_ns(self)))
+
+    def on_cloud(self, msg: Any) -> None:
+        """Accumulate a PointCloud2 in the odometry frame."""
+        self.pubs.publish(self.component.on_cloud(msg, now_ns(self)))
+
+    def on_odometry(self, msg: Any) -> None:
+        """Odometry sample (places the clouds)."""
+        self.component.on_odometry(msg, now_ns(self))
+
+    def on_tf(self, msg: Any) -> None:
+        """``/tf`` (places the clouds)."""
+        self.component.on_tf(msg, False, now_ns(self))
+
+    def on_tf_static(self, msg: Any) -> None:
+        """``/tf_static``: the sensor's mount."""
+        self.component.on_tf(msg, True, now_ns(self))
 
     def on_keyframe_status(self, msg: Any) -> None:
         """Track the keyframes announced; start on our own after ``auto_trigger_keyframes``."""

@@ -12,6 +12,7 @@ from typing import Literal
 
 __all__ = [
     'CAMERA_INFO',
+    'CLOUD',
     'COMPRESSED_SUFFIX',
     'DENSE_CLOUD',
     'DIAGNOSTICS',
@@ -97,6 +98,7 @@ class Topic:
 IMAGE = 'camera/image_raw'
 COMPRESSED_SUFFIX = '/compressed'
 CAMERA_INFO = 'camera/camera_info'
+CLOUD = 'points'
 ODOMETRY = 'odom'
 TF = '/tf'
 TF_STATIC = '/tf_static'
@@ -124,11 +126,14 @@ TABLE: tuple[Topic, ...] = (
     Topic(IMAGE, 'sensor_msgs/msg/Image', 'sensor', (), (_KF,)),
     Topic(IMAGE + COMPRESSED_SUFFIX, 'sensor_msgs/msg/CompressedImage', 'sensor', (), (_KF,)),
     Topic(CAMERA_INFO, 'sensor_msgs/msg/CameraInfo', 'sensor', (), (_KF,)),
-    Topic(ODOMETRY, 'nav_msgs/msg/Odometry', 'pose', (), (_KF,)),
+    # A depth camera's or a LiDAR's points (cloud.source): the reconstruction accumulates them
+    # in the odometry frame, so it takes the odometry and the transforms too.
+    Topic(CLOUD, 'sensor_msgs/msg/PointCloud2', 'sensor', (), (_RC,)),
+    Topic(ODOMETRY, 'nav_msgs/msg/Odometry', 'pose', (), (_KF, _RC)),
     # Where the camera sits on the cart (its offset from the odometry's base frame); the
     # reconstruction also places the stockpile frame in the odometry frame on /tf_static.
-    Topic(TF, 'tf2_msgs/msg/TFMessage', 'tf', (), (_KF,)),
-    Topic(TF_STATIC, 'tf2_msgs/msg/TFMessage', 'tf_static', (_RC,), (_KF,)),
+    Topic(TF, 'tf2_msgs/msg/TFMessage', 'tf', (), (_KF, _RC)),
+    Topic(TF_STATIC, 'tf2_msgs/msg/TFMessage', 'tf_static', (_RC,), (_KF, _RC)),
     # std_msgs/Empty: reconstruct now (recorded triggers replay).
     Topic(TRIGGER, 'std_msgs/msg/Empty', 'reliable', (), (_RC,)),
     # Each keyframe with its image, camera and pose: nothing but DDS between cart and base.

@@ -69,6 +69,8 @@ def _reconstruction_warnings(info: MeshInfo) -> list[str]:
     rejected = info.scale_details.get('odometry', {}).get('rejected')
     if rejected:
         out.append(f'Odometry was not used for the scale: {rejected}.')
+    # What reading and meshing a point cloud dropped or guessed (stockpile_ros.cloud).
+    out += list((info.cloud or {}).get('warnings', []))
     return out
 
 

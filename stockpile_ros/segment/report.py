@@ -49,6 +49,9 @@ _SCALE_HOW = {
     'odometry': 'from the fit of the Structure-from-Motion camera path to the odometry',
     'target+odometry': 'from the scale target and the odometry, combined by their uncertainties',
     'given': 'the mesh units given by the user (--units), no target or odometry',
+    'input units': 'the units of the survey file (LAS/LAZ coordinates, taken as metres), no '
+    'target or odometry',
+    'sensor': 'the range sensor that measured the point cloud (PointCloud2, metres), no target',
 }
 # Volume display units: litres for metric pages, cubic feet for inch pages.
 _VOLUME = {'mm': ('L', 1e-3), 'in': ('ft³', 0.0283168466)}

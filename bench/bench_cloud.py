@@ -1,0 +1,100 @@
+"""A survey cloud of 100k points and more from file to report: how long it takes, and how well.
+
+A simulated survey (``stockpile_ros.tools.sim.survey``: the simulator's pile of 220 rocks of 10-35
+cm sampled as a terrestrial scanner would, about 135k points at 7.5 mm, 2 mm range noise, tilted 10
+degrees and offset as georeferenced coordinates are) is written as binary PLY, ASCII XYZ and LAZ;
+each goes through ``stockpile segment FILE --units m`` (LAZ without --units: survey units) in this
+process. Printed per file: seconds from file to result folder, the reading and meshing part of it
+(measured again on its own), rocks found against the truth and the median b error. The survey is
+cached under ``--cache``.
+
+Usage:
+    .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--cache DIR]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ[_var] = '1'
+
+import argparse  # noqa: E402
+import pickle  # noqa: E402
+import shutil  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import laspy  # noqa: E402
+import numpy as np  # noqa: E402
+import open3d as o3d  # noqa: E402
+
+from stockpile_ros.cli import main  # noqa: E402
+from stockpile_ros.cloud import CloudOptions, mesh_cloud, read_cloud  # noqa: E402
+from stockpile_ros.recon.surface import PoissonOptions  # noqa: E402
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation  # noqa: E402
+from stockpile_ros.tools.sim.survey import Survey, score_survey, simulate_survey  # noqa: E402
+
+
+def survey(folder: Path, rocks: int, spacing: float) -> Survey:
+    """Return the cached survey, or simulate it (its truth in ``folder/truth``)."""
+    path = folder / 'survey.pickle'
+    if path.exists():
+        loaded: Survey = pickle.loads(path.read_bytes())
+        return loaded
+    pile = PileConfig(rocks=rocks, gradation=parse_gradation('0.1:0.35'))
+    made = simulate_survey(folder / 'truth', pile, seed=11, spacing=spacing, noise=0.002)
+    path.write_bytes(pickle.dumps(made))
+    return made
+
+
+def write_files(s: Survey, folder: Path) -> list[tuple[Path, list[str]]]:
+    """The survey as binary PLY, XYZ and LAZ, with the flags each is run with."""
+    ply, xyz, laz = folder / 'survey.ply', folder / 'survey.xyz', folder / 'survey.laz'
+    o3d.io.write_point_cloud(ply, o3d.geometry.PointCloud(o3d.utility.Vector3dVector(s.points)))
+    np.savetxt(xyz, s.points, fmt='%.4f')
+    header = laspy.LasHeader(point_format=3, version='1.4')
+    header.offsets = s.points.min(axis=0)
+    header.scales = np.full(3, 1e-4)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = s.points.T
+    las.write(str(laz))
+    return [(ply, ['--units', 'm']), (xyz, ['--units', 'm']), (laz, [])]
+
+
+def run() -> None:
+    """Run the benchmark and print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--rocks', type=int, default=220)
+    # 7.5 mm: 135k points on this pile (1 cm: 77k).
+    parser.add_argument('--spacing', type=float, default=0.0075)
+    parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
+    args = parser.parse_args()
+    folder = args.cache / f'{args.rocks}_{args.spacing:g}'
+    folder.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    s = survey(folder, args.rocks, args.spacing)
+    print(f'survey: {len(s.points)} points, {len(s.truth["rocks"])} rocks '
+          f'({time.perf_counter() - start:.1f} s to simulate or load)')  # fmt: skip
+    print(f'{"file":<12} {"MB":>6} {"to report s":>12} {"read+mesh s":>12} {"rocks":>6} '
+          f'{"recall":>7} {"precision":>9} {"|b| err %":>9}')  # fmt: skip
+    for path, flags in write_files(s, folder):
+        out = folder / f'result_{path.suffix[1:]}'
+        shutil.rmtree(out, ignore_errors=True)
+        t0 = time.perf_counter()
+        assert main(['segment', str(path), '--out', str(out), *flags]) == 0
+        total = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        cloud = read_cloud(path)
+        mesh_cloud(cloud, CloudOptions(), PoissonOptions(), 1.0, 'given')
+        meshing = time.perf_counter() - t1
+        scores = score_survey(out, folder / 'truth', s)
+        d = scores['detection']
+        b = scores['sizes']['summary_visible']['b']['median_abs_pct']
+        size = path.stat().st_size / 1e6
+        print(f'{path.name:<12} {size:6.1f} {total:12.1f} {meshing:12.1f} {d["result_rocks"]:6d} '
+              f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f}')  # fmt: skip
+
+
+if __name__ == '__main__':
+    run()

@@ -1,0 +1,141 @@
+"""Which way is up in a cloud, and the similarity that levels it into the ``stockpile`` frame.
+
+Up is given (``cloud.up``) or the normal of the cloud's trend plane: a robust least-squares plane
+over every point (Tukey's biweight, iteratively reweighted from the plain fit), so that on a pile
+with ground around it the ground wins and on a grain-covered bar, which has no bare ground, the
+bar's trend does. No single patch of ground is looked for. The plane's sign: the side most given
+normals point to; else the side the surface bulges towards over most of its area (rocks are
+convex and the valleys between them narrow; a tool's frame may have any axis up, as
+Structure-from-Motion ones do); else the input's +z.
+z = 0 is the plane moved down to a low percentile of the heights: the ground where some shows,
+the bottom of the gaps between grains where none does, so that the surface lies above it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial import cKDTree
+
+from ..errors import StockpileError
+from ..geometry import Similarity
+from ..recon.ground import pile_mask
+
+__all__ = ['level_transform', 'parse_up', 'trend_up']
+
+F64 = npt.NDArray[np.float64]
+
+# Tukey's biweight constant (95 % efficiency under Gaussian residuals) and the MAD's consistency.
+_TUKEY = 4.685
+_MAD = 1.4826
+_ITERATIONS = 30
+# More points than this add nothing to a plane's three parameters but time.
+_PLANE_SAMPLE = 200_000
+# How far from half the share of bulging points must be to tell the sides apart, and the points
+# (sampled) and neighbourhoods (points) that share is taken over.
+_CONVEX_MARGIN = 0.05
+_CONVEX_SAMPLE = 20_000
+_CONVEX_NEIGHBOURS = 50
+_FLAT = 1e-9
+
+
+def parse_up(text: str) -> F64 | None:
+    """Return the unit up vector of ``x,y,z`` text, or None for ``fit`` (the trend plane).
+
+    Raises:
+        StockpileError: Not ``fit`` nor three finite numbers of non-zero length.
+
+    """
+    if text.strip().lower() == 'fit':
+        return None
+    try:
+        values = np.array([float(v) for v in text.split(',')], dtype=np.float64)
+    except ValueError:
+        values = np.zeros(0)
+    norm = float(np.linalg.norm(values)) if values.size == 3 else 0.0
+    if values.size != 3 or not np.isfinite(values).all() or norm == 0:
+        raise StockpileError(f'up {text!r}: expected "fit" or three numbers x,y,z (e.g. 0,0,1)')
+    return np.asarray(values / norm)
+
+
+def _plane(points: F64, weights: F64) -> tuple[F64, F64]:
+    centre = np.average(points, axis=0, weights=weights)
+    d = points - centre
+    cov = (d * weights[:, None]).T @ d / weights.sum()
+    _, vectors = np.linalg.eigh(cov)
+    return np.asarray(vectors[:, 0]), np.asarray(centre)
+
+
+def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F64, str]:
+    """Return the unit normal of the robust trend plane, turned up, and how its sign was chosen."""
+    rng = np.random.default_rng(seed)
+    sample = points if len(points) <= _PLANE_SAMPLE else points[
+        rng.choice(len(points), _PLANE_SAMPLE, replace=False)]  # fmt: skip
+    weights = np.ones(len(sample))
+    normal, centre = _plane(sample, weights)
+    for _ in range(_ITERATIONS):
+        r = (sample - centre) @ normal
+        spread = _MAD * float(np.median(np.abs(r - np.median(r))))
+        if spread == 0:
+            break
+        u = r / (_TUKEY * spread)
+        new = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
+        if new.sum() < 3:
+            break
+        weights = new
+        previous = normal
+        normal, centre = _plane(sample, weights)
+        if abs(float(previous @ normal)) > 1 - 1e-12:
+            break
+    if normals is not None:
+        side = float(np.mean(normals @ normal > 0))
+        if side != 0.5:
+            return (normal if side > 0.5 else -normal), 'the side most given normals face'
+    bulging = _bulging_share(points, normal, rng)
+    if abs(bulging - 0.5) >= _CONVEX_MARGIN:
+        return (normal if bulging > 0.5 else -normal), 'the side the surface bulges towards'
+    return (normal if normal[2] >= 0 else -normal), "the input's +z (no side bulges)"
+
+
+def _bulging_share(points: F64, normal: F64, rng: np.random.Generator) -> float:
+    """Share of points higher along ``normal`` than the mean of their nearest points.
+
+    Rocks are convex: over most of a pile's or a bed's surface it bends away from the side it is
+    seen from, and the valleys between them are narrow.
+    """
+    picks = rng.choice(len(points), min(len(points), _CONVEX_SAMPLE), replace=False)
+    heights = (points - points.mean(axis=0)) @ normal
+    _, near = cKDTree(points).query(points[picks], k=min(len(points), _CONVEX_NEIGHBOURS))
+    bulge = heights[picks] - heights[near].mean(axis=1)
+    # Flat parts (within rounding of the cloud's size) bend neither way: they do not vote.
+    flat = np.abs(bulge) <= _FLAT * float(np.ptp(heights))
+    votes = bulge[~flat]
+    return float(np.mean(votes > 0)) if len(votes) else 0.5
+
+
+def level_transform(
+    points: F64, up: F64, metres_per_unit: float, ground_percentile: float
+) -> tuple[Similarity, F64]:
+    """Similarity from the input frame into the ``stockpile`` frame, and the ground plane.
+
+    z is ``up``; x the input's x (else y) laid in the plane, so a survey keeps its heading; the
+    origin is on the ground (``ground_percentile`` of the heights along ``up``) below the centroid
+    of what rises above it (:func:`~stockpile_ros.recon.ground.pile_mask`).
+
+    Returns:
+        The similarity and the ground plane ``(a, b, c, d)`` in input coordinates.
+
+    """
+    centre = points.mean(axis=0)
+    heights = (points - centre) @ up
+    floor = float(np.percentile(heights, ground_percentile))
+    above = points[pile_mask(heights - floor)]
+    middle = above.mean(axis=0) if len(above) else centre
+    origin = middle - ((middle - centre) @ up - floor) * up
+    x_axis = np.array([1.0, 0.0, 0.0]) - up[0] * up
+    if np.linalg.norm(x_axis) < 1e-6:
+        x_axis = np.array([0.0, 1.0, 0.0]) - up[1] * up
+    x_axis /= np.linalg.norm(x_axis)
+    rotation = np.stack([x_axis, np.cross(up, x_axis), up])
+    sim = Similarity(metres_per_unit, rotation, -metres_per_unit * rotation @ origin)
+    return sim, np.append(up, -float(up @ origin))

@@ -1,0 +1,218 @@
+"""A simulated survey cloud of a pile (terrestrial or phone LiDAR), with its truth folder.
+
+The pile is the simulator's (:func:`~.pile.build_pile`); the cloud samples its visible union
+surface (:func:`~stockpile_ros.tools.synthetic.sample_scene`) as seen from a ring of scanner
+positions and one overhead, uniformly in area at a chosen spacing, with Gaussian range noise,
+then moves it into a survey frame (tilted, far from the origin as georeferenced coordinates are)
+so that the levelling and the float precision are tested too. Points are spread as a scanner's
+are, one to a cell of a grid. The truth (``truth.json``,
+``scene.ply``) stays in the pile's frame, ``pile``; ``survey_to_pile`` maps the cloud back.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+from ...bagio.writer import BagWriter
+from ...geometry import Similarity
+from ...ros import messages as m
+from ...ros.outputs import pointcloud2
+from ...segment.gradation import gradation
+from ..evaluation import evaluate_sides, load_result, load_truth
+from ..synthetic import SyntheticPile, sample_scene
+from .pile import PileConfig, build_pile
+from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
+
+__all__ = ['Survey', 'score_survey', 'simulate_survey', 'write_scan_bag']
+
+F64 = npt.NDArray[np.float64]
+
+# Samples per spacing squared drawn before one per grid cell is kept: enough that nearly every
+# cell the surface crosses holds one.
+_OVERSAMPLE = 8.0
+# A surface crosses about two grid cells per cell area: cells of 1.5 spacings give a median
+# nearest-neighbour distance near the spacing (0.64 cell measured).
+_CELL = 1.5
+
+
+@dataclass(frozen=True)
+class Survey:
+    """A simulated survey.
+
+    Attributes:
+        points: Nx3 points in the survey frame.
+        normals: Nx3 true unit normals (survey frame).
+        labels: N true labels (0 ground, else the rock id).
+        survey_to_pile: Maps survey coordinates into the truth frame.
+        truth: The ``truth.json`` dict.
+
+    """
+
+    points: F64
+    normals: F64
+    labels: npt.NDArray[np.int32]
+    survey_to_pile: Similarity
+    truth: dict[str, Any]
+
+
+def simulate_survey(
+    out: str | Path,
+    pile: PileConfig,
+    *,
+    seed: int = 0,
+    spacing: float = 0.01,
+    noise: float = 0.002,
+    tilt_deg: float = 10.0,
+    offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
+) -> Survey:
+    """Build a pile, write its truth folder into ``out`` and return a survey cloud of it.
+
+    Args:
+        out: Truth folder (created).
+        pile: The pile.
+        seed: Random seed of the pile, the samples and the noise.
+        spacing: Median distance between neighbouring points, about [m].
+        noise: Standard deviation of the range noise, along each point's normal [m].
+        tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
+        offset: Where the pile's origin lies in the survey frame [m].
+
+    """
+    rng = np.random.default_rng(seed)
+    rocks = build_pile(rng, pile)
+    reach = max(float(np.abs(r.mesh.vertices[:, :2]).max()) for r in rocks)
+    ground_half = reach + 0.5
+    scene = scene_mesh(rocks, ground_half)
+    ring = np.radians(np.arange(0.0, 360.0, 45.0))
+    eyes = np.column_stack([2.5 * reach * np.cos(ring), 2.5 * reach * np.sin(ring),
+                            np.full(len(ring), 1.5)])  # fmt: skip
+    eyes = np.vstack([eyes, [[0.0, 0.0, 3.0 * reach]]])
+    density = _OVERSAMPLE / spacing**2
+    dense = sample_scene(scene.vertices, scene.faces, scene.labels, density, margin=0.3,
+                         seed=seed, viewpoints=eyes)  # fmt: skip
+    counts = np.bincount(dense.labels, minlength=max(r.id for r in rocks) + 1)
+    truths = []
+    for rock in rocks:
+        record = rock_truth(rock, 0.0)
+        record['visible_fraction'] = min(1.0, float(counts[rock.id]) / (record['area'] * density))
+        truths.append(record)
+    # One sample per cell of a grid, as evenly as a scanner's sweep lays them (not in the clumps
+    # of uniform random samples).
+    cells = np.floor(dense.points / (_CELL * spacing)).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
+    truth = {
+        'schema': TRUTH_SCHEMA,
+        'units': 'm',
+        'frame_id': 'pile',
+        'seed': seed,
+        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'tilt_deg': tilt_deg,
+                             'rocks': pile.rocks, 'gradation': pile.gradation.as_dict()}},
+        'cameras': [],
+        'target': None,
+        'specific_gravity': SPECIFIC_GRAVITY,
+        'rocks': truths,
+        'gradation': gradation([r['b'] for r in truths], [r['mass'] for r in truths]),
+    }  # fmt: skip
+    write_truth(out, truth, scene)
+    points = sampled.points + rng.normal(0.0, noise, len(sampled.points))[:, None] * sampled.normals
+    axis = rng.normal(size=3)
+    axis[2] = 0.0
+    axis /= np.linalg.norm(axis)
+    rotation = Rotation.from_rotvec(np.radians(tilt_deg) * axis).as_matrix()
+    shift = np.asarray(offset, dtype=np.float64)
+    to_pile = Similarity(1.0, rotation.T, -rotation.T @ shift)
+    return Survey(
+        points=points @ rotation.T + shift,
+        normals=sampled.normals @ rotation.T,
+        labels=sampled.labels,
+        survey_to_pile=to_pile,
+        truth=truth,
+    )
+
+
+def score_survey(
+    result_dir: str | Path,
+    truth_dir: str | Path,
+    survey: Survey,
+    mesh_info: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Score a result made from a survey cloud against its truth (:func:`~.evaluation.evaluate`).
+
+    A cloud has no keyframes to align by: the result is moved back into the cloud's frame with the
+    transform the run itself recorded (``model_to_stockpile`` of ``mesh_info``, the run's
+    ``mesh.json``, or of ``report.json``'s ``mesh``), then into the truth frame with
+    ``survey.survey_to_pile``.
+    """
+    result = load_result(result_dir)
+    report = json.loads((Path(result_dir) / 'report.json').read_text())
+    record = (mesh_info or report['mesh'])['model_to_stockpile']
+    rotation = np.asarray(record['rotation'], dtype=np.float64).reshape(3, 3)
+    scale, shift = float(record['scale']), np.asarray(record['translation'], dtype=np.float64)
+    metres = float(report['scale']['metres_per_unit'])
+    to = survey.survey_to_pile
+
+    def back(points: F64) -> F64:
+        # x_stockpile = scale R x_cloud + t, with x_cloud in the cloud's units.
+        return to.apply(((points - shift) @ rotation) / scale * metres)
+
+    result.mesh.vertices = back(result.mesh.vertices)
+    for rock in result.rocks.values():
+        if rock.centroid is not None:
+            rock.centroid = back(rock.centroid.reshape(1, 3))[0]
+    result.frame_id = str(survey.truth['frame_id'])
+    return evaluate_sides(result, load_truth(truth_dir))
+
+
+def write_scan_bag(
+    bag: str | Path, survey: Survey, *, scans: int = 16, height: float = 1.5, seed: int = 0
+) -> Path:
+    """Write a cart circling the pile with a LiDAR on a mast scanning ``survey``, as a ROS 2 bag.
+
+    The survey must be in the pile's frame (``tilt_deg=0``, ``offset`` zero): that frame is the
+    odometry frame ``odom``. Each point goes to one scan among those whose sensor it faces (every
+    point once: a real sensor samples new places each sweep), in the sensor frame ``lidar_link``.
+    Topics: ``/points`` (PointCloud2, x, y, z), ``/odom`` and ``/tf`` (``odom`` -> ``base_link``,
+    ten poses a scan) and ``/tf_static`` (``base_link`` -> ``lidar_link``: up the mast, turned
+    and pitched towards the pile).
+    """
+    rng = np.random.default_rng(seed)
+    points = survey.points
+    radius = 1.3 * float(np.max(np.linalg.norm(points[:, :2], axis=1)))
+    mount = Rotation.from_euler('zy', [0.0, 30.0], degrees=True)
+    steps = 10
+    angles = np.linspace(0.0, 2 * np.pi, scans * steps, endpoint=False)
+    bases = np.column_stack(
+        [radius * np.cos(angles), radius * np.sin(angles), np.zeros(len(angles))]
+    )
+    yaws = Rotation.from_euler('z', (angles + np.pi)[:, None])
+    sensors = bases[::steps] + np.array([0.0, 0.0, height])
+    facing = np.einsum('sij,ij->is', sensors[:, None, :] - points[None], survey.normals) > 0
+    weights = facing / np.maximum(facing.sum(axis=1, keepdims=True), 1)
+    cumulative = np.cumsum(weights, axis=1)
+    owner = (cumulative < rng.random(len(points))[:, None]).sum(axis=1)
+    owner[~facing.any(axis=1)] = -1
+    start = 1_000_000_000
+    with BagWriter(Path(bag)) as writer:
+        f = writer.factory
+        static = m.transform_stamped(f, start, 'base_link', 'lidar_link', [0.0, 0.0, height],
+                                     mount.as_quat())  # fmt: skip
+        writer.write('/tf_static', m.tf_message(f, [static]), start)
+        for k, (base, yaw) in enumerate(zip(bases, yaws, strict=True)):
+            t = start + k * 10_000_000
+            quat = yaw.as_quat()
+            writer.write('/odom', m.odometry(f, t, base, quat), t)
+            tf = m.transform_stamped(f, t, 'odom', 'base_link', base, quat)
+            writer.write('/tf', m.tf_message(f, [tf]), t)
+            if k % steps == 0:
+                to_lidar = (yaw * mount).inv()
+                seen = points[owner == k // steps] - sensors[k // steps]
+                cloud = pointcloud2(f, to_lidar.apply(seen), None, None, t, 'lidar_link')
+                writer.write('/points', cloud, t)
+    return Path(bag)
