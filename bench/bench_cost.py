@@ -1,7 +1,7 @@
 """Cost growth with the number of keyframes: wall time and peak memory of every stage.
 
     .venv/bin/python bench/bench_cost.py --root DIR [--keyframes 20 40 80 160]
-        [--width 1280 --height 960] [--set KEY=VALUE ...]
+        [--width 1280 --height 960] [--set KEY=VALUE ...] [--stages STAGE ...]
 
 For each count N an orbit of N frames round a pile of 14 rocks is simulated into DIR/orbitN
 (once; reused after), and every frame is made a keyframe (``selector.min_spacing=1``, a viewing
@@ -10,6 +10,8 @@ defaults. The stages (keyframes, sfm, dense, mesh, segment) then run one after t
 its own fresh process, so that its peak resident memory (``ru_maxrss``, which sees native
 allocations that tracemalloc does not) is its own. Printed per stage: wall time, peak memory and
 what it made. The machine's other load inflates the times; compare the counts within one run.
+``--stages`` runs only the stages named, on what the earlier ones left in DIR/workN (to compare
+one stage's cost before and after a change without redoing the others).
 """
 
 from __future__ import annotations
@@ -67,7 +69,9 @@ def _stage(stage: str, bag: Path, values: dict[str, Any], queue: Any) -> None:
     queue.put((seconds, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, summary))
 
 
-def run_count(root: Path, count: int, width: int, height: int, sets: dict[str, Any]) -> None:
+def run_count(
+    root: Path, count: int, width: int, height: int, sets: dict[str, Any], stages: list[str]
+) -> None:
     """Simulate (when missing) and reconstruct the N-keyframe orbit, printing each stage."""
     bag = root / f'orbit{count}'
     if not bag.exists():
@@ -85,7 +89,8 @@ def run_count(root: Path, count: int, width: int, height: int, sets: dict[str, A
         )
         simulate(cfg, bag)
     work = root / f'work{count}'
-    shutil.rmtree(work, ignore_errors=True)
+    if 'keyframes' in stages:
+        shutil.rmtree(work, ignore_errors=True)
     values = {
         'work_dir': str(work),
         'recon.target': TARGET,
@@ -97,7 +102,7 @@ def run_count(root: Path, count: int, width: int, height: int, sets: dict[str, A
     print(f'{count} keyframes, {width}x{height}:', flush=True)
     ctx = mp.get_context('spawn')
     total, peak = 0.0, 0
-    for stage in STAGES:
+    for stage in stages:
         queue = ctx.Queue()
         proc = ctx.Process(target=_stage, args=(stage, bag, values, queue))
         proc.start()
@@ -123,13 +128,14 @@ def main() -> None:
     parser.add_argument('--width', type=int, default=1280)
     parser.add_argument('--height', type=int, default=960)
     parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE')
+    parser.add_argument('--stages', nargs='+', default=list(STAGES), choices=STAGES)
     args = parser.parse_args()
     sets = {}
     for item in args.set:
         key, _, value = item.partition('=')
         sets[key] = yaml.safe_load(value)
     for count in args.keyframes:
-        run_count(args.root, count, args.width, args.height, sets)
+        run_count(args.root, count, args.width, args.height, sets, args.stages)
 
 
 if __name__ == '__main__':
