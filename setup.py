@@ -49,6 +49,8 @@ setup(
             'types-PyYAML',
             'mcap>=1.1,<2',
             'hypothesis>=6',
+            # renders the printed targets' PDF pages to check them (tests/test_target_pages.py).
+            'pypdfium2>=4',
         ],
     },
     zip_safe=True,

@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from stockpile_ros import messages as m
 from stockpile_ros.bagio.reader import read_frames
 from stockpile_ros.bagio.summary import summarize
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.camera import CameraModel
-from stockpile_ros.msgs import typestore
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros.typestore import typestore
 
 
 def make_items(frames: int, width: int, height: int) -> list[tuple[str, object, int]]:

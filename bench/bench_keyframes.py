@@ -24,15 +24,16 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.errors import CaptureError
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder, reconstruct
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.settings import build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 AIM_HEIGHT = 0.1
 
@@ -96,7 +97,7 @@ def run_case(case: Case, root: Path, sfm: bool) -> str:
     truth = json.loads((truth_folder(bag) / 'truth.json').read_text())
     angles = true_angles(truth, [r.stamp_ns for r in records])
     line = (
-        f'{case.name:16s} {case.frames:4d} frames  {kept["keyframes"]:3d} kept  '
+        f'{case.name:16s} {case.frames:4d} frames  {kept.keyframes:3d} kept  '
         f'true angle max {max(angles, default=0):5.1f} median {np.median(angles):5.1f} deg'
     )
     if sfm:

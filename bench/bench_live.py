@@ -28,9 +28,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'tests'))
 
 from live_graph import Recorder, play, rig, spin, trigger, wait
 
-from stockpile_ros import topics
 from stockpile_ros.bagio.reader import BagReader
 from stockpile_ros.replay import replay
+from stockpile_ros.ros import topics
 from stockpile_ros.settings import build_settings
 
 

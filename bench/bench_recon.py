@@ -27,7 +27,8 @@ import cv2
 import numpy as np
 
 from stockpile_ros.recon.keyframes import KeyframeSelector, KeyframeStore
-from stockpile_ros.recon.pipeline import ReconOptions, reconstruct
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.recon.scale import TargetSpec
 from stockpile_ros.recon.sources import iter_frames
 

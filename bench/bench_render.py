@@ -20,11 +20,11 @@ import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 
 from stockpile_ros.camera import CameraModel  # noqa: E402
-from stockpile_ros.sim.camera_path import CartPath, PathConfig, auto_distance  # noqa: E402
-from stockpile_ros.sim.pile import PileConfig  # noqa: E402
-from stockpile_ros.sim.record import finish_image  # noqa: E402
-from stockpile_ros.sim.render import Renderer  # noqa: E402
-from stockpile_ros.sim.scene import SceneConfig, build_scene  # noqa: E402
+from stockpile_ros.tools.sim.camera_path import CartPath, PathConfig, auto_distance  # noqa: E402
+from stockpile_ros.tools.sim.pile import PileConfig  # noqa: E402
+from stockpile_ros.tools.sim.record import finish_image  # noqa: E402
+from stockpile_ros.tools.sim.render import Renderer  # noqa: E402
+from stockpile_ros.tools.sim.scene import SceneConfig, build_scene  # noqa: E402
 
 
 def main() -> None:

@@ -31,8 +31,8 @@ def _run(bag: Path, out: Path, params: Path | None) -> None:
         stages['segment'] = summary.outcome.seconds['segment']
     rest = total - sum(stages.values())
     print(f'bag {bag}: {summary.frames} frames, {summary.keyframes} keyframes')
-    if summary.recon and 'sfm' in summary.recon.results:
-        print(f'registered {summary.recon.results["sfm"].get("registered")}')
+    if summary.recon and summary.recon.sparse:
+        print(f'registered {summary.recon.sparse.registered}')
     print(f'rocks {len(summary.report["rocks"]) if summary.report else "none"}')
     for name, seconds in stages.items():
         print(f'  {name:<10} {seconds:7.1f} s')

@@ -30,9 +30,9 @@ import numpy as np  # noqa: E402
 from stockpile_ros.meshio import read_labelled_mesh  # noqa: E402
 from stockpile_ros.segment.gradation import gradation  # noqa: E402
 from stockpile_ros.segment.measure import measure_rocks  # noqa: E402
-from stockpile_ros.segment.scoring import rock_recall_precision  # noqa: E402
 from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh  # noqa: E402
-from stockpile_ros.segment.synthetic import (  # noqa: E402
+from stockpile_ros.tools.scoring import rock_recall_precision  # noqa: E402
+from stockpile_ros.tools.synthetic import (  # noqa: E402
     make_pile,
     poisson_mesh,
     sample_scene,

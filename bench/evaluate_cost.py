@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from stockpile_ros.evaluation.inputs import load_truth
-from stockpile_ros.evaluation.match import MatchOptions, match_rocks, transfer_labels
 from stockpile_ros.meshio import LabelledMesh
+from stockpile_ros.tools.evaluation.inputs import load_truth
+from stockpile_ros.tools.evaluation.match import MatchOptions, match_rocks, transfer_labels
 
 
 def subdivide(mesh: LabelledMesh) -> LabelledMesh:

@@ -13,16 +13,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import topics
+from .artefacts import KeyframeSummary, WorkFolder
 from .bagio.reader import BagReader, ReadStats, camera_info_topic_for
 from .components import KeyframeComponent, ReconstructionComponent
 from .errors import CaptureError, StockpileError
-from .messages import RosbagsFactory
-from .msgs import typestore
 from .progress import progress
-from .publish import Publication
-from .recon.pipeline import ReconOptions, WorkFolder, run_keyframes
+from .recon.options import ReconOptions
 from .recon.sources import source_kind
+from .recon.stages import run_keyframes
+from .ros import topics
+from .ros.messages import RosbagsFactory
+from .ros.publications import Publication
+from .ros.typestore import typestore
 from .settings import Settings
 
 __all__ = ['BagInputs', 'bag_inputs', 'collect_keyframes', 'drive', 'keyframes_from_bag']
@@ -143,7 +145,7 @@ def drive(
     return last_ns
 
 
-def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) -> dict[str, Any]:
+def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) -> KeyframeSummary:
     """Select a bag's keyframes into the work folder's ``keyframes/``, as the nodes would.
 
     The keyframe component keeps its selection in ``capture/`` and hands each keyframe, as a
@@ -177,13 +179,13 @@ def keyframes_from_bag(bag: Path, settings: Settings, topic: str | None = None) 
             f'no keyframe was kept out of {state.frames} frames (rejections: {state.decisions})',
             'Check that the source holds sharp images of the pile',
         )
-    return {'frames': state.frames, 'keyframes': count, 'new': count - before,
-            'decisions': state.decisions, 'problems': stats.problems}  # fmt: skip
+    return KeyframeSummary(state.frames, count, count - before, dict(state.decisions),
+                           stats.problems)  # fmt: skip
 
 
 def collect_keyframes(
     settings: Settings,
-) -> Callable[[Path, WorkFolder, ReconOptions], dict[str, Any]]:
+) -> Callable[[Path, WorkFolder, ReconOptions], KeyframeSummary]:
     """Return the keyframe stage of ``stockpile reconstruct``: bags as the nodes take them.
 
     Args:
@@ -191,7 +193,7 @@ def collect_keyframes(
 
     """
 
-    def stage(source: Path, work: WorkFolder, options: ReconOptions) -> dict[str, Any]:
+    def stage(source: Path, work: WorkFolder, options: ReconOptions) -> KeyframeSummary:
         if source_kind(source) != 'bag':
             return run_keyframes(source, work, options)
         here = dataclasses.replace(settings, work_dir=work.root, recon=options)

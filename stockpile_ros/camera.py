@@ -56,6 +56,29 @@ class CameraModel:
         """Whether this model describes ``image``: its size must match (else self-calibrate)."""
         return (self.height, self.width) == image.shape[:2]
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (as in ``keyframes.jsonl``)."""
+        return {
+            'width': self.width,
+            'height': self.height,
+            'k': [float(v) for v in np.asarray(self.k).ravel()],
+            'd': [float(v) for v in np.asarray(self.d).ravel()],
+            'distortion_model': self.distortion_model,
+            'frame_id': self.frame_id,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> CameraModel:
+        """Inverse of :meth:`to_dict`."""
+        return cls(
+            width=int(data['width']),
+            height=int(data['height']),
+            k=np.asarray(data['k'], dtype=np.float64).reshape(3, 3),
+            d=np.asarray(data.get('d', []), dtype=np.float64),
+            distortion_model=str(data.get('distortion_model', 'plumb_bob')),
+            frame_id=str(data.get('frame_id', 'camera_optical_frame')),
+        )
+
     @classmethod
     def from_fov(cls, width: int, height: int, hfov_deg: float, **kwargs: Any) -> CameraModel:
         """Build a distortion-free camera from its horizontal field of view."""

@@ -11,16 +11,16 @@ into the same work and result folders. No output bag is written: there is no str
 from __future__ import annotations
 
 import dataclasses
-import json
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .artefacts import MeshInfo, SparseSummary, WorkFolder, load
 from .components import result_lines
 from .errors import CaptureError, StockpileError
-from .recon.pipeline import WorkFolder, run_keyframes
 from .recon.sources import source_kind
+from .recon.stages import run_keyframes
 from .runner import Outcome, run_reconstruction, run_segmentation
 from .runs import claim
 from .segment.provenance import Provenance
@@ -41,7 +41,7 @@ class SourceSummary:
         decisions: Keyframe decisions by reason (rejections included).
         recon: The reconstruction's outcome, None when no keyframe was kept.
         outcome: The last stage's outcome.
-        mesh: ``mesh.json`` of the reconstruction, None when it did not get that far.
+        mesh: What the reconstruction says of its mesh, None when it did not get that far.
         report: The report.json dict, None when no result was produced.
         work_dir: Work folder.
         result_dir: Result folder.
@@ -56,7 +56,7 @@ class SourceSummary:
     decisions: dict[str, int] = field(default_factory=dict)
     recon: Outcome | None = None
     outcome: Outcome | None = None
-    mesh: dict[str, Any] | None = None
+    mesh: MeshInfo | None = None
     report: dict[str, Any] | None = None
     work_dir: Path = Path()
     result_dir: Path = Path()
@@ -126,12 +126,12 @@ def _measure(path: Path, kind: str, out_dir: Path, settings: Settings) -> Source
         counts = run_keyframes(path, work, settings.recon)
     except CaptureError as exc:
         return _failed(summary, Outcome(False, exc.stage, exc.reason, exc.advice))
-    summary.frames, summary.keyframes = counts['frames'], counts['keyframes']
-    summary.decisions = dict(counts['decisions'])
+    summary.frames, summary.keyframes = counts.frames, counts.keyframes
+    summary.decisions = dict(counts.decisions)
     summary.recon = recon = run_reconstruction(settings)
     if not recon.ok:
         return _failed(summary, recon)
-    summary.mesh = recon.results['mesh']
+    summary.mesh = recon.mesh
     made_from = Provenance.for_input(path, settings.values, defaults())
     segmentation = run_segmentation(settings, work.mesh, summary.result_dir, made_from)
     if not segmentation.ok or segmentation.analysis is None:
@@ -147,40 +147,39 @@ def _registration(work: Path) -> list[str]:
     path = work / 'sparse' / 'sparse.json'
     if not path.exists():
         return []
-    sparse = json.loads(path.read_text())
-    lines = [f'intrinsics: {sparse["camera"]}']
-    models = sparse.get('model_images', [])
+    sparse = load(SparseSummary, path)
+    lines = [f'intrinsics: {sparse.camera}']
+    models = sparse.model_images
     lines.append(
-        f'registered {sparse["registered"]}/{sparse["total"]} keyframes in the largest of '
-        f'{len(models)} model(s), reprojection {sparse["mean_reprojection_error_px"]:.2f} px'
+        f'registered {sparse.registered}/{sparse.total} keyframes in the largest of '
+        f'{len(models)} model(s), reprojection {sparse.mean_reprojection_error_px:.2f} px'
     )
     for number, model in enumerate(models[1:], start=2):
-        names = model.get('photos', model['images'])
-        lines.append(f'left out, model {number} ({model["registered"]}): {", ".join(names)}')
-    lost = sparse.get('unregistered_photos', sparse['unregistered'])
-    in_models = {n for m in models[1:] for n in m.get('photos', m['images'])}
+        names = model.photos or model.images
+        lines.append(f'left out, model {number} ({model.registered}): {", ".join(names)}')
+    lost = sparse.unregistered_photos or sparse.unregistered
+    in_models = {n for m in models[1:] for n in m.photos or m.images}
     alone = [n for n in lost if n not in in_models]
     if alone:
         lines.append(f'registered in no model: {", ".join(alone)}')
-    if sparse.get('matcher_note'):
-        lines.append(f'matching: {sparse["matcher_note"]}')
+    if sparse.matcher_note:
+        lines.append(f'matching: {sparse.matcher_note}')
     return lines
 
 
-def _scale_line(mesh: dict[str, Any]) -> str:
-    scale = mesh['scale']
-    if scale['method'] == 'none':
-        given = 'target' in mesh.get('scale_details', {})
+def _scale_line(mesh: MeshInfo) -> str:
+    scale = mesh.scale
+    if not scale.metric:
+        given = 'target' in mesh.scale_details
         why = 'the target was not seen in 3 registered views' if given else 'no target was given'
         return (
             f'scale: none: every size is in model units, not metres ({why}); put a printed '
             'marker in view and give it, e.g. --set recon.target=aruco:DICT_4X4_50:0:0.15'
         )
-    rel = scale.get('rel_uncertainty')
+    rel = scale.rel_uncertainty
     unc = '' if rel is None else f' +/- {100 * rel:.2f} %'
-    parts = ', '.join(f'{k} {100 * v:.2f} %' for k, v in (scale.get('parts') or {}).items()
-                      if v is not None)  # fmt: skip
-    return f'scale: {scale["method"]}{unc}' + (f' ({parts})' if parts else '')
+    parts = ', '.join(f'{k} {100 * v:.2f} %' for k, v in scale.parts.items() if v is not None)
+    return f'scale: {scale.method}{unc}' + (f' ({parts})' if parts else '')
 
 
 def summary_lines(s: SourceSummary) -> tuple[list[str], list[str]]:

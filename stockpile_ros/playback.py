@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from . import topics
 from .bagio.reader import BagReader, ReadStats
+from .ros import topics
 
 __all__ = [
     'INPUTS',

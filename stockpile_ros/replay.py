@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import topics
 from .bagdrive import BagInputs, bag_inputs, drive
 from .bagio.reader import BagReader, ReadStats
 from .bagio.writer import PARTIAL_SUFFIX, BagWriter
 from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
-from .publish import DIAGNOSTIC_PREFIX, Publication, diagnostics, status
+from .ros import topics
+from .ros.publications import DIAGNOSTIC_PREFIX, Publication, diagnostics, status
 from .runner import Outcome
 from .runs import claim
 from .segment.provenance import Provenance

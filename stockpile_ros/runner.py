@@ -11,12 +11,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from .artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
 from .errors import CaptureError, StockpileError
 from .meshcheck import read_mesh
 from .recon.keyframes import KeyframeStore
-from .recon.pipeline import WorkFolder, reconstruct
+from .recon.pipeline import reconstruct
 from .segment.pipeline import Analysis, analyse_mesh
 from .segment.provenance import Provenance
 from .segment.qa import report_options
@@ -43,9 +43,11 @@ class Outcome:
         stage: The stage that failed, or the last one run.
         reason: What went wrong ('' when ok).
         advice: What the operator should do ('' when ok).
-        results: Each finished stage's result dict by name.
+        sparse: What the sfm stage made, when it finished.
+        dense: What the dense stage made, when it finished.
+        mesh: What the mesh stage made, when it finished.
         seconds: Each finished stage's duration by name.
-        analysis: The segmentation analysis (segmentation runs only).
+        analysis: The segmentation analysis, report included (segmentation runs only).
 
     """
 
@@ -53,9 +55,16 @@ class Outcome:
     stage: str
     reason: str = ''
     advice: str = ''
-    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+    sparse: SparseSummary | None = None
+    dense: DenseSummary | None = None
+    mesh: MeshInfo | None = None
     seconds: dict[str, float] = field(default_factory=dict)
     analysis: Analysis | None = None
+
+    def finished(self) -> list[tuple[str, SparseSummary | DenseSummary | MeshInfo]]:
+        """Return the reconstruction stages that finished, in order, with what each made."""
+        made = (('sfm', self.sparse), ('dense', self.dense), ('mesh', self.mesh))
+        return [(stage, result) for stage, result in made if result is not None]
 
 
 def _failure(stage: str, exc: Exception, outcome: Outcome) -> Outcome:
@@ -84,8 +93,7 @@ def run_reconstruction(
             done, its duration [s] (None when it starts).
 
     Returns:
-        The outcome; ``results`` holds ``sparse.json``-like, ``dense.json`` and ``mesh.json``
-        dicts of the stages that finished.
+        The outcome, with what each stage that finished made.
 
     """
     outcome = Outcome(ok=True, stage=RECON_STAGES[0])
@@ -106,7 +114,12 @@ def run_reconstruction(
         except _FAILURES as exc:
             return _failure(stage, exc, outcome)
         outcome.stage = stage
-        outcome.results[stage] = result
+        if isinstance(result, SparseSummary):
+            outcome.sparse = result
+        elif isinstance(result, DenseSummary):
+            outcome.dense = result
+        elif isinstance(result, MeshInfo):
+            outcome.mesh = result
         outcome.seconds[stage] = time.perf_counter() - start
         if on_stage is not None:
             on_stage(stage, index, outcome.seconds[stage])
@@ -130,7 +143,7 @@ def run_segmentation(
             (the parameters, site, pile and operator from ``settings``).
 
     Returns:
-        The outcome, ``analysis`` set and ``results['segment']`` the report dict when ok.
+        The outcome, ``analysis`` (with the report) set when ok.
 
     """
     outcome = Outcome(ok=True, stage='segment')
@@ -138,7 +151,7 @@ def run_segmentation(
     start = time.perf_counter()
     try:
         mesh, check = read_mesh(mesh_dir / 'mesh.ply')
-        info = json.loads((mesh_dir / 'mesh.json').read_text())
+        info = load(MeshInfo, mesh_dir / 'mesh.json')
         spec = class_spec(settings)
         options = report_options(settings.values)
         analysis = analyse_mesh(
@@ -148,7 +161,7 @@ def run_segmentation(
             report_options=options,
         )  # fmt: skip
         analysis.report['mesh']['check'] = check.as_dict()
-        if info['scale']['method'] != 'none':
+        if info.scale.metric:
             # In model units (no scale) a size in metres says nothing.
             analysis.report['warnings'][:0] = check.warnings
         made = provenance or Provenance.for_input(
@@ -160,6 +173,5 @@ def run_segmentation(
     except _FAILURES as exc:
         return _failure('segment', exc, outcome)
     outcome.analysis = analysis
-    outcome.results['segment'] = analysis.report
     outcome.seconds['segment'] = time.perf_counter() - start
     return outcome

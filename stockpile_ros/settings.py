@@ -32,7 +32,7 @@ from .errors import StockpileError
 from .ranges import Range
 from .recon.dense import DenseOptions
 from .recon.keyframes import SelectorOptions
-from .recon.pipeline import ReconOptions
+from .recon.options import ReconOptions
 from .recon.scale import parse_targets
 from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions

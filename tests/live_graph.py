@@ -17,9 +17,9 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from stockpile_ros import topics
 from stockpile_ros.nodes.common import qos_profile
 from stockpile_ros.nodes.interfaces import get_message
+from stockpile_ros.ros import topics
 
 DONE, FAILED = 4, 5
 OUTPUTS = [t for t in topics.TABLE if t.publishers]

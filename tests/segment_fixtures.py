@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-from stockpile_ros.segment.synthetic import make_pile, poisson_mesh
+from stockpile_ros.tools.synthetic import make_pile, poisson_mesh
 
 
 @functools.lru_cache(maxsize=1)

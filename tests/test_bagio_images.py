@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from stockpile_ros.bagio.images import ImageError, decode_compressed, decode_image, decode_raw
 from stockpile_ros.errors import StockpileError
+from stockpile_ros.ros.images import ImageError, decode_compressed, decode_image, decode_raw
 
 RNG = np.random.default_rng(3)
 RGB = RNG.integers(0, 256, (5, 7, 3), dtype=np.uint8)

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from stockpile_ros import messages as m
 from stockpile_ros.bagio.reader import (
     CAMERA_INFO_TOLERANCE_NS,
     BagReader,
@@ -21,7 +20,8 @@ from stockpile_ros.bagio.reader import (
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.errors import BagError
-from stockpile_ros.msgs import typestore
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros.typestore import typestore
 
 FIXTURES = Path(__file__).resolve().parents[2] / 'shared' / 'fixtures'
 RS_BAGS = FIXTURES / 'rosbags-rs'

@@ -10,11 +10,11 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import ConnectionExtRosbag2, QosDurability, QosReliability
 
-from stockpile_ros import messages as m
-from stockpile_ros import outputs as o
 from stockpile_ros.bagio.reader import BagReader
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.cli import main
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import outputs as o
 
 S = 1_000_000_000
 STATUS = '/stockpile/status'

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from stockpile_ros import messages as m
-from stockpile_ros import topics
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.components import KeyframeComponent, ReconstructionComponent
-from stockpile_ros.msgs import typestore
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import topics
+from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.settings import build_settings
 
 F = m.RosbagsFactory(typestore())

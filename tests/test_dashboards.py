@@ -6,7 +6,7 @@ from pathlib import Path
 
 import yaml
 
-from stockpile_ros import topics
+from stockpile_ros.ros import topics
 
 DASHBOARDS = Path(__file__).resolve().parents[1] / 'dashboards'
 KNOWN = {'/' + t.name.lstrip('/') for t in topics.TABLE}

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from stockpile_ros.evaluation.align import (
+from stockpile_ros.tools.evaluation.align import (
     align_trajectories,
     match_stamps,
     nearest_rotation,
     rotation_angle,
 )
-from stockpile_ros.evaluation.inputs import EvaluationError, Poses
+from stockpile_ros.tools.evaluation.inputs import EvaluationError, Poses
 
 
 def _random_similarity(seed: int) -> tuple[float, np.ndarray, np.ndarray]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stockpile_ros.evaluation.match import (
+from stockpile_ros.tools.evaluation.match import (
     OFF_SURFACE,
     LabelTransfer,
     MatchOptions,

@@ -19,8 +19,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from stockpile_ros.cli import main
-from stockpile_ros.evaluation import EvaluationError, EvaluationOptions, MatchOptions, evaluate
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+from stockpile_ros.tools.evaluation import (
+    EvaluationError,
+    EvaluationOptions,
+    MatchOptions,
+    evaluate,
+)
 
 SINK = 0.0173
 FPS_NS = 33_333_333

@@ -20,8 +20,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stockpile_ros.bagio.images import RAW_ENCODINGS, ImageError, decode_compressed, decode_raw
 from stockpile_ros.meshio import LabelledMesh, MeshError, read_labelled_mesh, write_labelled_mesh
+from stockpile_ros.ros.images import RAW_ENCODINGS, ImageError, decode_compressed, decode_raw
 
 LIMIT = 4096  # pixels
 # The largest image within the limit is 4096 px x 4 channels x 2 bytes; every copy on the way

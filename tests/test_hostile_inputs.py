@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from segment_fixtures import small_pile
 
-from stockpile_ros import messages as m
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+from stockpile_ros.ros import messages as m
 
 S = 1_000_000_000
 MB = 1 << 20

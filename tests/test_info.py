@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stockpile_ros import messages as m
 from stockpile_ros.bagio.summary import format_summary, summarize
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.cli import main
+from stockpile_ros.ros import messages as m
 
 FIXTURES = Path(__file__).resolve().parents[2] / 'shared' / 'fixtures'
 FIXTURE_BAGS = {

@@ -20,14 +20,14 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from stockpile_ros import messages as m  # noqa: E402
-from stockpile_ros import topics  # noqa: E402
-from stockpile_ros.nodes.common import RclpyFactory, qos_profile  # noqa: E402
+from stockpile_ros.nodes.common import Inbox, RclpyFactory, qos_profile  # noqa: E402
 from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
 from stockpile_ros.nodes.reconstruction_node import ReconstructionNode  # noqa: E402
 from stockpile_ros.nodes.segmentation_node import SegmentationNode  # noqa: E402
-from stockpile_ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
+from stockpile_ros.ros import messages as m  # noqa: E402
+from stockpile_ros.ros import topics  # noqa: E402
+from stockpile_ros.ros.outputs import diagnostic_array, pointcloud2  # noqa: E402
 from stockpile_ros.settings import settings_for  # noqa: E402
 
 
@@ -49,6 +49,37 @@ def test_factory_builds_messages_rclpy_accepts() -> None:
     assert diag.status[0].level == diag.status[0].WARN
 
 
+class _Log:
+    def __init__(self) -> None:
+        self.errors: list[str] = []
+
+    def error(self, text: str) -> None:
+        self.errors.append(text)
+
+
+def test_inbox_keeps_arrival_order_drops_oldest_frames_and_survives_errors() -> None:
+    log = _Log()
+    inbox = Inbox(max_droppable=2, logger=log)
+    done: list[str] = []
+    gate = threading.Event()
+    inbox.put(lambda: gate.wait(5))  # holds the thread while the rest queues up
+    for name in ['f1', 'odom1', 'f2', 'f3', 'odom2', 'f4']:
+        inbox.put(lambda name=name: done.append(name), droppable=name.startswith('f'))
+
+    def fail() -> None:
+        raise ValueError('bad message')
+
+    inbox.put(fail)
+    inbox.put(lambda: done.append('after'))
+    gate.set()
+    assert inbox.drain(5)
+    # Frames beyond two waiting went oldest first; the rest kept their order.
+    assert done == ['odom1', 'f3', 'odom2', 'f4', 'after']
+    assert inbox.dropped == 2
+    assert len(log.errors) == 1 and 'bad message' in log.errors[0]
+    inbox.close()
+
+
 def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
     node = KeyframeNode(parameter_overrides=[Parameter('work_dir', value=str(tmp_path))])
     try:
@@ -61,6 +92,7 @@ def test_parameters_declared_with_ranges(ros: None, tmp_path: Path) -> None:
         assert not node.set_parameters([Parameter('work_dir', value='/x')])[0].successful
         # A value accepted at run time takes effect from the next frame on.
         assert node.set_parameters([Parameter('selector.min_parallax', value=0.5)])[0].successful
+        assert node.inbox.drain(5)
         assert node.component.collector.selector.options.min_parallax == 0.5
     finally:
         node.destroy_node()

@@ -16,11 +16,11 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import MessageDefinitionFormat
 from rosbags.typesys import Stores, get_typestore
 
-from stockpile_ros import messages as m
-from stockpile_ros import outputs as o
-from stockpile_ros.bagio.images import decode_image
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.camera import CameraModel
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import outputs as o
+from stockpile_ros.ros.images import decode_image
 
 STAMP = 1_700_000_000_123_456_789
 
@@ -220,7 +220,7 @@ def test_every_published_type_round_trips(tmp_path: Path, default: str) -> None:
 
 
 def test_builders_reject_bad_input() -> None:
-    from stockpile_ros.msgs import typestore
+    from stockpile_ros.ros.typestore import typestore
 
     f = m.RosbagsFactory(typestore())
     with pytest.raises(ValueError, match='Nx3'):
@@ -240,7 +240,7 @@ def test_builders_reject_bad_input() -> None:
 
 
 def test_pointcloud_without_colours_or_labels() -> None:
-    from stockpile_ros.msgs import typestore
+    from stockpile_ros.ros.typestore import typestore
 
     f = m.RosbagsFactory(typestore())
     cloud = o.pointcloud2(f, [[1.0, 2.0, 3.0]], None, None, 0, 'x')

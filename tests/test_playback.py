@@ -8,17 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from stockpile_ros import messages as m
 from stockpile_ros.bagio.writer import BagWriter
-from stockpile_ros.messages import RosbagsFactory
-from stockpile_ros.msgs import typestore
-from stockpile_ros.playback import (
-    input_topics,
-    parse_mapping,
-    play,
-    timed_messages,
-    wait_until,
-)
+from stockpile_ros.playback import input_topics, parse_mapping, play, timed_messages, wait_until
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros.messages import RosbagsFactory
+from stockpile_ros.ros.typestore import typestore
 
 F = RosbagsFactory(typestore())
 T0 = 1_700_000_000_000_000_000

@@ -24,17 +24,17 @@ pytest.importorskip('tf2_msgs', reason='the tf2_msgs interface package is not bu
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 
-from stockpile_ros import messages as m  # noqa: E402
-from stockpile_ros import topics  # noqa: E402
 from stockpile_ros.bagio.reader import BagReader  # noqa: E402
 from stockpile_ros.bagio.writer import BagWriter  # noqa: E402
 from stockpile_ros.camera import CameraModel  # noqa: E402
-from stockpile_ros.messages import RosbagsFactory  # noqa: E402
-from stockpile_ros.msgs import typestore  # noqa: E402
 from stockpile_ros.nodes.common import qos_profile  # noqa: E402
 from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
-from stockpile_ros.outputs import diagnostic_array, pipeline_status  # noqa: E402
 from stockpile_ros.playback import to_message  # noqa: E402
+from stockpile_ros.ros import messages as m  # noqa: E402
+from stockpile_ros.ros import topics  # noqa: E402
+from stockpile_ros.ros.messages import RosbagsFactory  # noqa: E402
+from stockpile_ros.ros.outputs import diagnostic_array, pipeline_status  # noqa: E402
+from stockpile_ros.ros.typestore import typestore  # noqa: E402
 
 F = RosbagsFactory(typestore())
 T0 = 1_700_000_000_000_000_000

@@ -5,14 +5,14 @@ from pathlib import Path
 
 import numpy as np
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder
 from stockpile_ros.settings import build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig, parse_gradation
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 TINY = SimulationConfig(
     seed=5,
@@ -40,16 +40,16 @@ def test_bag_keyframes_carry_camera_and_odometry_and_resume(tmp_path: Path) -> N
     every = {'selector.min_parallax': 0.0, 'selector.min_spacing': 1, 'selector.blur_ratio': 0.0,
              'work_dir': str(work.root)}  # fmt: skip
     first = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 3}))
-    assert first['keyframes'] == 3
+    assert first.keyframes == 3
     # A later run (the "restart") continues after the frames already kept.
     rest = keyframes_from_bag(bag, build_settings({**every, 'selector.max_keyframes': 8}))
-    assert rest['new'] == 5 and rest['keyframes'] == 8
+    assert rest.new == 5 and rest.keyframes == 8
     records = KeyframeStore(work.keyframes).records
     assert [r.index for r in records] == list(range(8))
     for record in records:
         assert record.camera is not None and record.camera.width == 96
-        assert record.odometry is not None and record.odometry['frame_id'] == 'odom'
+        assert record.odometry is not None and record.odometry.frame_id == 'odom'
         # The optical centre from odometry and /tf_static is the true camera position.
         np.testing.assert_allclose(
-            record.odometry['camera_position'], true_centres[record.stamp_ns], atol=1e-3
+            record.odometry.camera_position, true_centres[record.stamp_ns], atol=1e-3
         )

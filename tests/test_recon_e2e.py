@@ -7,12 +7,14 @@ import numpy as np
 import open3d as o3d
 from recon_synth import look_at, orbit, render, scene_mesh
 
+from stockpile_ros.artefacts import OdometryEntry, WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.geometry import umeyama
 from stockpile_ros.meshio import read_labelled_mesh
 from stockpile_ros.recon.dense import DenseOptions
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.recon.sfm import SfmOptions
 from stockpile_ros.recon.surface import PoissonOptions
 
@@ -26,13 +28,7 @@ def test_synthetic_views_to_metric_mesh(tmp_path: Path) -> None:
     centres = orbit(10)
     for i, c in enumerate(centres):
         rot, trans = look_at(c, np.array([0.0, 0.0, 0.1]))
-        odo = {
-            'position': list(c),
-            'orientation_xyzw': [0, 0, 0, 1],
-            'frame_id': 'odom',
-            'child_frame_id': 'base_link',
-            'camera_position': list(c),
-        }
+        odo = OdometryEntry(list(c), [0.0, 0.0, 0.0, 1.0], camera_position=list(c))
         store.add(
             Frame(i * 10**8, render(mesh, cam.k, (640, 480), rot, trans), 'c', cam, '', i),
             odometry=odo,
@@ -43,7 +39,7 @@ def test_synthetic_views_to_metric_mesh(tmp_path: Path) -> None:
         poisson=PoissonOptions(depth=7),
     )
     results = reconstruct(None, tmp_path, options, stage='sfm')
-    assert results['sfm']['registered'] == 10
+    assert results['sfm'].registered == 10
     for stage in ('dense', 'mesh'):
         reconstruct(None, tmp_path, options, stage=stage)
     info = json.loads((work.mesh / 'mesh.json').read_text())

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 from recon_synth import look_at, orbit, render, scene_mesh
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.recon.gates import GateOptions, angular_span, registration_gate
 from stockpile_ros.recon.keyframes import KeyframeStore
-from stockpile_ros.recon.pipeline import WorkFolder
 from stockpile_ros.runner import run_reconstruction
 from stockpile_ros.settings import build_settings
 
@@ -64,6 +64,6 @@ def test_half_the_keyframes_of_something_else_stop_the_run(tmp_path: Path) -> No
     assert not outcome.ok and outcome.stage == 'sfm'
     assert 'of 12 keyframes registered in one model' in outcome.reason
     assert 'overlap' in outcome.advice
-    assert 'dense' not in outcome.results and not (tmp_path / 'dense').exists()
+    assert outcome.dense is None and not (tmp_path / 'dense').exists()
     gate = json.loads((tmp_path / 'sparse' / 'sparse.json').read_text())['gate']
     assert not gate['passed'] and gate['registered'] <= 7

@@ -11,9 +11,11 @@ import open3d as o3d
 import pytest
 from recon_synth import look_at, render, scene_mesh
 
+from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.recon.keyframes import KeyframeSelector, KeyframeStore, SelectorOptions
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, run_keyframes
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.stages import run_keyframes
 
 
 def _texture(seed: int = 0, size: int = 1600) -> np.ndarray:
@@ -117,14 +119,14 @@ def test_photo_folder_resumes_without_duplicates(tmp_path: Path) -> None:
         cv2.imwrite(str(photos / f'p{i:02d}.png'), _view(tex, 80 * i))
     work = WorkFolder(tmp_path / 'work')
     first = run_keyframes(photos, work, ReconOptions())
-    assert first['keyframes'] == 5 and first['new'] == 5
+    assert first.keyframes == 5 and first.new == 5
     again = run_keyframes(photos, work, ReconOptions())
-    assert again['keyframes'] == 5 and again['new'] == 0
+    assert again.keyframes == 5 and again.new == 0
     # Losing the last keyframe (a crash before its line) only redoes that one.
     lines = (work.keyframes / 'keyframes.jsonl').read_text().splitlines()
     (work.keyframes / 'keyframes.jsonl').write_text('\n'.join(lines[:3]) + '\n')
     redo = run_keyframes(photos, work, ReconOptions())
-    assert redo['keyframes'] == 5 and redo['new'] == 2
+    assert redo.keyframes == 5 and redo.new == 2
 
 
 @dataclass

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -7,10 +8,12 @@ import numpy as np
 import pytest
 from recon_synth import look_at, orbit, render, scene_mesh
 
+from stockpile_ros.artefacts import KeyframeRecord, WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
 from stockpile_ros.errors import CaptureError
-from stockpile_ros.recon.keyframes import KeyframeRecord, KeyframeStore
-from stockpile_ros.recon.pipeline import ReconOptions, WorkFolder, reconstruct
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.recon.options import ReconOptions
+from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.recon.sfm import SfmOptions, _shared_camera, load_sparse
 
 
@@ -101,3 +104,6 @@ def test_a_rerun_gives_the_same_model(tmp_path: Path) -> None:
     for name, view in runs[0].views.items():
         assert np.array_equal(view.center, runs[1].views[name].center)
     assert np.array_equal(runs[0].points, runs[1].points)
+    # A camera fixed from CameraInfo has no focal length of its own to doubt.
+    sparse = json.loads((tmp_path / 'a' / 'sparse' / 'sparse.json').read_text())
+    assert sparse['camera'] == 'fixed from CameraInfo' and sparse['focal_rel_uncertainty'] is None

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stockpile_ros import messages as m
-from stockpile_ros import topics
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.cli import main
 from stockpile_ros.replay import replay
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import topics
 from stockpile_ros.settings import build_settings
 
 CAMERA = CameraModel(64, 48, np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]]), np.zeros(5),

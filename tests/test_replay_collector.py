@@ -8,11 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stockpile_ros import messages as m
+from stockpile_ros.artefacts import OdometryEntry
 from stockpile_ros.camera import Frame
-from stockpile_ros.msgs import typestore
 from stockpile_ros.recon.collector import KeyframeCollector, OdometryBuffer, heading_coverage
 from stockpile_ros.recon.keyframes import SelectorOptions
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros.typestore import typestore
 
 
 def test_heading_coverage() -> None:
@@ -58,7 +59,7 @@ def test_collects_stores_and_resumes(tmp_path: Path) -> None:
     odo = KeyframeCollector(tmp_path / 'odo', options)
     for i in range(12):
         frame = Frame(1000 * i, _texture(8 * i), 'cam', None, 'cam/image', i)
-        odo.push(frame, {'position': [0.0, 0.0, 0.0], 'orientation_xyzw': _quat(0.2 * i)})
+        odo.push(frame, OdometryEntry([0.0, 0.0, 0.0], _quat(0.2 * i)))
     assert odo.state.coverage_source == 'odometry'
     assert 0.2 < odo.state.coverage < 0.7
 
@@ -71,8 +72,8 @@ def test_odometry_buffer_interpolates_between_the_samples_on_both_sides() -> Non
     buf.push(2000, (5.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
     assert buf.covers(1500) and buf.latest_ns == 2000
     entry = buf.at(1750)
-    assert entry is not None and entry['position'] == pytest.approx([4.0, 2.0, 3.0])
-    assert (entry['frame_id'], entry['child_frame_id']) == ('odom', 'base_link')
+    assert entry is not None and entry.position == pytest.approx([4.0, 2.0, 3.0])
+    assert (entry.frame_id, entry.child_frame_id) == ('odom', 'base_link')
     assert buf.at(2500) is None  # after the last sample
     buf.push(5000, (9.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 'odom', 'base_link')
     assert buf.at(3000) is None  # across a gap longer than max_gap_ns
@@ -85,7 +86,8 @@ def test_odometry_buffer_places_the_camera_with_the_live_transforms() -> None:
     yaw = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
     buf = OdometryBuffer()
     buf.push(1000, (1.0, 0.0, 0.0), yaw, 'odom', 'base_link')
-    assert 'camera_position' not in (buf.at(1000, 'camera_optical_frame') or {})
+    unlinked = buf.at(1000, 'camera_optical_frame')
+    assert unlinked is not None and unlinked.camera_position is None
     level = (0.0, 0.0, 0.0, 1.0)
     mount = m.transform_stamped(f, 0, 'camera_link', 'camera_optical_frame', (0, 0, 0), level)
     buf.tree.add(m.tf_message(f, [mount]), static=True, log_ns=0)
@@ -94,5 +96,5 @@ def test_odometry_buffer_places_the_camera_with_the_live_transforms() -> None:
         buf.tree.add(m.tf_message(f, [mast]), static=False, log_ns=stamp)
     entry = buf.at(1000, 'camera_optical_frame')
     assert entry is not None
-    assert entry['camera_position'] == pytest.approx([1.0, 0.5, 0.3])
-    assert entry['position'] == [1.0, 0.0, 0.0]
+    assert entry.camera_position == pytest.approx([1.0, 0.5, 0.3])
+    assert entry.position == [1.0, 0.0, 0.0]

@@ -14,7 +14,7 @@ ROS = {'rclpy', 'rcl_interfaces', 'rosidl_runtime_py', 'std_msgs', 'std_srvs', '
        'stockpile_msgs'}  # fmt: skip
 # The core components a node may call; everything else (stages, numpy work) stays behind them.
 # playback: the bag player's loops (ROS-free); errors: the exception classes a main() reports.
-CORE = {'topics', 'publish', 'components', 'settings', 'errors', 'playback', 'bagio.reader'}
+CORE = {'ros', 'ros.publications', 'components', 'settings', 'errors', 'playback', 'bagio.reader'}
 HEAVY = {'numpy', 'scipy', 'open3d', 'pycolmap', 'cv2', 'rosbags', 'matplotlib'}
 
 
@@ -61,12 +61,25 @@ def test_node_modules_hold_no_numeric_work() -> None:
                            '_descriptor', '_build', '_array', 'qos_profile', 'subscribe',
                            'get_message', 'get_service', '_interface'}  # fmt: skip
                 assert node.name in allowed, f'{path.name}: {node.name}'
+        # The inbox's thread loops over its queue: that is wiring too.
+        inbox = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and f.name == '_work']
+        queue_loops = {id(n) for f in inbox for n in ast.walk(f) if isinstance(n, ast.While)}
         for node in ast.walk(tree):
-            if isinstance(node, (ast.For, ast.While)):
+            if isinstance(node, (ast.For, ast.While)) and id(node) not in queue_loops:
                 # Loops only walk declared parameters, publications or nodes.
                 target = ast.unparse(node.iter) if isinstance(node, ast.For) else 'while'
                 assert target in {'settings_for(component)', 'publications', 'nodes',
                                   'types.items()'}, f'{path.name}: loop over {target}'  # fmt: skip
+
+
+def test_the_measuring_path_never_imports_the_tools() -> None:
+    # The simulator, the evaluation and the test scenes are tools; only their commands use them.
+    commands = {PACKAGE / 'cli' / 'simulate.py', PACKAGE / 'cli' / 'evaluate.py'}
+    for path in PACKAGE.rglob('*.py'):
+        if 'tools' in path.relative_to(PACKAGE).parts or path in commands:
+            continue
+        for level, name in _imports(ast.parse(path.read_text())):
+            assert 'tools' not in name.split('.'), f'{path}: imports {"." * level}{name}'
 
 
 def test_nothing_outside_the_node_layer_imports_ros() -> None:

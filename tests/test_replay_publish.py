@@ -11,19 +11,20 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
-from stockpile_ros import topics
+from stockpile_ros.artefacts import DenseSummary, MeshInfo, OdometryEntry, SparseSummary
 from stockpile_ros.camera import Frame
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
-from stockpile_ros.messages import RosbagsFactory
-from stockpile_ros.msgs import typestore
-from stockpile_ros.publish import (
+from stockpile_ros.recon.collector import CollectorState
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.ros import topics
+from stockpile_ros.ros.messages import RosbagsFactory
+from stockpile_ros.ros.publications import (
     keyframe_status,
     reconstruction_diagnostics,
     reconstruction_outputs,
     segmentation_outputs,
 )
-from stockpile_ros.recon.collector import CollectorState
-from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.runner import Outcome
 from stockpile_ros.segment.pipeline import analyse_mesh
 
@@ -45,11 +46,10 @@ def test_keyframe_status() -> None:
 
 
 def test_reconstruction_diagnostics_levels() -> None:
-    ok = Outcome(True, 'mesh', results={
-        'sfm': {'registered': 9, 'keyframes': 10, 'mean_reprojection_error_px': 0.3},
-        'dense': {'points': 1000},
-        'mesh': {'scale': {'method': 'none', 'metres_per_unit': 1.0, 'rel_uncertainty': None}},
-    }, seconds={'sfm': 1.0, 'dense': 2.0, 'mesh': 3.0})  # fmt: skip
+    sparse = SparseSummary(9, 10, 0.9, 1, 500, 0.3, 900.0, 'fixed from CameraInfo', [],
+                           'sequential', '', 'incremental', ['kf_9.png'], [])  # fmt: skip
+    ok = Outcome(True, 'mesh', sparse=sparse, dense=DenseSummary('sgbm-pairs', False, 1000),
+                 mesh=MeshInfo(), seconds={'sfm': 1.0, 'dense': 2.0, 'mesh': 3.0})  # fmt: skip
     statuses = [_roundtrip(m).status[0] for _, m in reconstruction_diagnostics(F, 1, ok)]
     assert [s.name for s in statuses] == ['stockpile/sfm', 'stockpile/dense', 'stockpile/mesh']
     assert [s.level for s in statuses] == [0, 0, 1]  # no metric scale: WARN
@@ -109,13 +109,13 @@ def test_reconstruction_outputs_move_the_cloud_and_decimate(tmp_path: Path) -> N
         # The camera sits 0.5 m above a base that the fit must not take for it.
         camera = (turn.apply(position) + shift).tolist()
         base = [camera[0], camera[1], camera[2] - 0.5]
-        odometry = {'position': base, 'frame_id': 'odom', 'camera_position': camera,
-                    'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]}  # fmt: skip
+        odometry = OdometryEntry(base, [0.0, 0.0, 0.0, 1.0], camera_position=camera)
         frame = Frame(i, np.zeros((4, 4, 3), np.uint8), 'camera_optical_frame', index=i)
         record = store.add(frame, odometry=odometry)
         keyframes.append({'stamp_ns': i, 'file': record.file, 'position': position,
                           'orientation_xyzw': [0.0, 0.0, 0.0, 1.0]})  # fmt: skip
-    info = {'model_to_stockpile': sim, 'keyframes': keyframes, 'scale': {'method': 'target'}}
+    info = {'model_to_stockpile': sim, 'keyframes': keyframes, 'scale': {'method': 'target'},
+            'units': 'm'}  # fmt: skip
     (tmp_path / 'mesh' / 'mesh.json').write_text(json.dumps(info))
     out = dict(reconstruction_outputs(F, 3, tmp_path, 'stockpile', max_faces=1000))
     (placed,) = _roundtrip(out[topics.TF_STATIC]).transforms

@@ -5,9 +5,9 @@ import pytest
 from segment_fixtures import small_pile
 
 from stockpile_ros.segment.adjacency import FaceAdjacency, face_adjacency, face_geometry
-from stockpile_ros.segment.bfs import reference_bfs
 from stockpile_ros.segment.criterion import edge_scores
 from stockpile_ros.segment.region import grow_regions
+from stockpile_ros.tools.reference_bfs import reference_bfs
 
 
 def _noisy_sphere(seed: int) -> tuple[np.ndarray, np.ndarray]:

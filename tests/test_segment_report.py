@@ -9,12 +9,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 from segment_fixtures import small_pile
 
-from stockpile_ros import messages as m
-from stockpile_ros import topics
+from stockpile_ros.artefacts import MeshInfo, from_json
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
-from stockpile_ros.msgs import typestore
-from stockpile_ros.publish import capture_warnings
+from stockpile_ros.ros import messages as m
+from stockpile_ros.ros import topics
+from stockpile_ros.ros.publications import capture_warnings
+from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.segment.measure import RockMeasure, visibility_warnings
 
 ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',
@@ -44,7 +45,9 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     report = json.loads((out / 'report.json').read_text(), parse_constant=lambda c: 1 / 0)
     assert report['schema'] == 'stockpile-report/2'
     assert report['units'] == 'm' and report['frame_id'] == 'stockpile'
-    assert report['scale'] == info['scale'] and report['keyframes'] == info['keyframes']
+    # The scale and the keyframes come from mesh.json, the scale's parts and note filled in.
+    assert report['scale'] == {**info['scale'], 'parts': {}, 'note': ''}
+    assert report['keyframes'] == [{**k, 'file': ''} for k in info['keyframes']]
     assert len(report['rocks']) >= 3
     for rock in report['rocks']:
         assert set(rock) == ROCK_KEYS
@@ -187,8 +190,8 @@ def test_a_keyframe_photo_gets_the_rocks_outlined(tmp_path) -> None:
     (keyframes / 'keyframes.jsonl').write_text(json.dumps(entry) + '\n')
     pose = {'stamp_ns': 7, 'position': cam.position.tolist(),
             'orientation_xyzw': Rotation.from_matrix(cam.rotation).as_quat().tolist()}  # fmt: skip
-    info = {'scale': {'method': 'target', 'metres_per_unit': 1.0, 'rel_uncertainty': 0.01},
-            'keyframes': [pose]}  # fmt: skip
+    info = from_json(MeshInfo, {'scale': {'method': 'target', 'rel_uncertainty': 0.01},
+                                'units': 'm', 'keyframes': [pose]})  # fmt: skip
     analysis = analyse_mesh(v, f, mesh_info=info)
     out = tmp_path / 'result'
     paths = write_result_folder(out, analysis, Provenance(input_path='x'), None, keyframes)

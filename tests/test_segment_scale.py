@@ -9,6 +9,7 @@ import numpy.typing as npt
 import pytest
 from segment_fixtures import height_field, small_pile
 
+from stockpile_ros.artefacts import MeshInfo, ScaleRecord
 from stockpile_ros.segment.adjacency import FaceAdjacency
 from stockpile_ros.segment.gradation import load_class_table
 from stockpile_ros.segment.measure import measure_rocks
@@ -158,7 +159,7 @@ def test_a_class_finer_than_the_mesh_is_warned_about() -> None:
     spec = load_class_table()['classes']['I']
     # Median edges of about 43 mm: class I's 47 mm is about one of them. The class sizes the
     # segmentation only on a metric mesh.
-    metric = {'scale': {'method': 'target', 'metres_per_unit': 1.0, 'rel_uncertainty': 0.01}}
+    metric = MeshInfo(ScaleRecord('target', 1.0, 0.01), units='m')
     warned = analyse_mesh(v, f, spec=spec, mesh_info=metric).report['warnings']
     assert any('the mesh resolves' in w for w in warned)
     assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report['warnings'])

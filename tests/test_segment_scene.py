@@ -4,9 +4,9 @@ import numpy as np
 from segment_fixtures import small_pile
 
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks
-from stockpile_ros.segment.scoring import rock_recall_precision
 from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
-from stockpile_ros.segment.synthetic import truth_face_labels
+from stockpile_ros.tools.scoring import rock_recall_precision
+from stockpile_ros.tools.synthetic import truth_face_labels
 
 
 def test_default_mode_recovers_the_rocks() -> None:

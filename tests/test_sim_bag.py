@@ -15,10 +15,10 @@ from scipy.spatial.transform import Rotation
 from stockpile_ros.cli import main
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.meshio import read_labelled_mesh
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig, parse_gradation
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 TINY = SimulationConfig(
     seed=4,
@@ -175,7 +175,7 @@ def test_cli_writes_bag_and_refuses_to_overwrite(
 def test_a_failed_run_leaves_no_half_written_bag(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from stockpile_ros.sim import record
+    from stockpile_ros.tools.sim import record
 
     def broken(*_: object) -> None:
         raise RuntimeError('renderer failed')

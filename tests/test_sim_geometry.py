@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from stockpile_ros.errors import StockpileError
-from stockpile_ros.sim.pile import PileConfig, build_pile, parse_gradation
-from stockpile_ros.sim.rocks import (
+from stockpile_ros.tools.sim.pile import PileConfig, build_pile, parse_gradation
+from stockpile_ros.tools.sim.rocks import (
     SHAPES,
     RockMesh,
     icosphere,
@@ -144,7 +144,7 @@ def test_pile_rocks_rest_on_the_ground_or_on_rocks_without_overlap() -> None:
 @pytest.mark.parametrize('kind', ['arc', 'straight', 'orbit'])
 def test_every_path_keeps_the_pile_centre_in_view(kind: str) -> None:
     from stockpile_ros.camera import CameraModel
-    from stockpile_ros.sim.camera_path import CartPath, PathConfig
+    from stockpile_ros.tools.sim.camera_path import CartPath, PathConfig
 
     cam = CameraModel.from_fov(640, 480, 70)
     path = CartPath(PathConfig(kind=kind, heights=(0.8, 1.5), distance=1.5, length=2.0), 9.0)

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from stockpile_ros.camera import CameraModel
-from stockpile_ros.sim.camera_path import CartPath, PathConfig, quat_from_matrix
-from stockpile_ros.sim.pile import PileConfig, parse_gradation
-from stockpile_ros.sim.render import BOARD_LABEL, Renderer, linear_to_srgb8
-from stockpile_ros.sim.scene import Scene, SceneConfig, build_scene
-from stockpile_ros.sim.texture import charuco_board
-from stockpile_ros.sim.truth import VisibilityAccumulator
+from stockpile_ros.tools.sim.camera_path import CartPath, PathConfig, quat_from_matrix
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
+from stockpile_ros.tools.sim.render import BOARD_LABEL, Renderer, linear_to_srgb8
+from stockpile_ros.tools.sim.scene import Scene, SceneConfig, build_scene
+from stockpile_ros.tools.sim.texture import charuco_board
+from stockpile_ros.tools.sim.truth import VisibilityAccumulator
 
 
 @pytest.fixture(scope='module')
@@ -115,7 +115,7 @@ def test_quaternion_round_trip() -> None:
 
 
 def test_motion_blur_smears_along_the_motion_only() -> None:
-    from stockpile_ros.sim.record import finish_image, motion_blur
+    from stockpile_ros.tools.sim.record import finish_image, motion_blur
 
     img = np.zeros((41, 41, 3), dtype=np.float32)
     img[20, 20] = 1.0

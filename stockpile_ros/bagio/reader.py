@@ -24,9 +24,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 
 from ..camera import CameraModel, Frame
-from ..errors import BagError, StockpileError
-from ..msgs import typestore
-from .images import DEFAULT_MAX_PIXELS, ImageError, decode_image
+from ..errors import BagError
+from ..ros.convert import CameraInfoError, camera_model_from_msg, message_stamp_ns
+from ..ros.images import DEFAULT_MAX_PIXELS, ImageError, decode_image
+from ..ros.typestore import typestore
 
 __all__ = [
     'CAMERA_INFO_TOLERANCE_NS',
@@ -37,13 +38,10 @@ __all__ = [
     'ODOMETRY_TYPE',
     'TF_TYPE',
     'BagReader',
-    'CameraInfoError',
     'PoseSample',
     'ReadStats',
     'camera_info_topic_for',
-    'camera_model_from_msg',
     'image_topics',
-    'message_stamp_ns',
     'open_bag',
     'read_frames',
     'read_messages',
@@ -194,15 +192,6 @@ def open_bag(bag: str | Path) -> Iterator[AnyReader]:
         reader.close()
 
 
-def message_stamp_ns(msg: Any, fallback_ns: int) -> int:
-    """Return a message's header stamp in ns, or ``fallback_ns`` when it has none or it is zero."""
-    header = getattr(msg, 'header', None)
-    if header is None:
-        return fallback_ns
-    stamp = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-    return stamp if stamp > 0 else fallback_ns
-
-
 def _connections(reader: AnyReader, bag: Path, topics: Iterable[str]) -> list[Connection]:
     wanted = set(topics)
     missing = wanted - {c.topic for c in reader.connections}
@@ -272,36 +261,6 @@ def _topics_of(reader: AnyReader, msgtypes: Iterable[str]) -> list[tuple[str, in
         if conn.msgtype in kinds:
             counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
     return sorted(counts.items(), key=lambda item: (-item[1], item[0]))
-
-
-class CameraInfoError(StockpileError, ValueError):
-    """A CameraInfo message that does not describe a usable camera."""
-
-
-def camera_model_from_msg(msg: Any) -> CameraModel:
-    """Build a :class:`CameraModel` from a ``sensor_msgs/CameraInfo``.
-
-    Raises:
-        CameraInfoError: Zero size, or an uncalibrated or malformed K.
-
-    """
-    k = np.asarray(msg.k, dtype=np.float64)
-    if k.size != 9:
-        raise CameraInfoError(f'CameraInfo K has {k.size} values, not 9')
-    k = k.reshape(3, 3)
-    width, height = int(msg.width), int(msg.height)
-    if width <= 0 or height <= 0:
-        raise CameraInfoError(f'CameraInfo size is {width}x{height}')
-    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise CameraInfoError('CameraInfo is uncalibrated (K has no positive focal lengths)')
-    return CameraModel(
-        width=width,
-        height=height,
-        k=k,
-        d=np.asarray(msg.d, dtype=np.float64).reshape(-1),
-        distortion_model=str(msg.distortion_model),
-        frame_id=str(msg.header.frame_id),
-    )
 
 
 def _base_topic(topic: str) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..progress import progress
-from .images import describe_encoding
+from ..ros.images import describe_encoding
 from .reader import (
     CAMERA_INFO_TYPE,
     IMAGE_TYPES,

@@ -39,8 +39,8 @@ from rosbags.interfaces import (
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys.store import Typestore
 
-from ..messages import RosbagsFactory
-from ..msgs import typestore
+from ..ros.messages import RosbagsFactory
+from ..ros.typestore import typestore
 
 __all__ = ['LATCHED_QOS', 'PARTIAL_SUFFIX', 'VOLATILE_QOS', 'BagWriter']
 

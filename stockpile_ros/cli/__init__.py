@@ -25,6 +25,7 @@ COMMANDS = {
     'segment': 'segment a stockpile mesh into rocks and report sizes, shapes and gradation',
     'simulate': 'render a ROS 2 bag of a synthetic rock pile with its ground truth',
     'evaluate': 'score a result folder against a simulator truth folder',
+    'target': 'write a PDF of a scale target at true size, with its spec and a check line',
 }
 
 

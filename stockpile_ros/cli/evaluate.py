@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..evaluation import EvaluationOptions, MatchOptions, evaluate, format_table
+from ..tools.evaluation import EvaluationOptions, MatchOptions, evaluate, format_table
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 

@@ -6,8 +6,8 @@ import argparse
 import json
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
+from ..artefacts import StageResult, to_json
 from ..bagdrive import collect_keyframes
 from ..recon.pipeline import STAGES, reconstruct
 from ..runs import claim
@@ -55,8 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_run_arguments(parser, 'the work folder')
 
 
-def _summary(name: str, result: dict[str, Any], seconds: float) -> None:
-    shown = {k: v for k, v in result.items() if k not in ('keyframes', 'unregistered')}
+def _summary(name: str, result: StageResult, seconds: float) -> None:
+    shown = {k: v for k, v in to_json(result).items() if k not in ('keyframes', 'unregistered')}
     print(f'{name}: {seconds:.1f} s {json.dumps(shown, default=str)}', flush=True)
 
 

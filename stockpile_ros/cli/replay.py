@@ -55,11 +55,10 @@ def _print_summary(s: ReplaySummary) -> None:
     calib = 'CameraInfo' if s.camera_info else 'self-calibrated (no usable CameraInfo)'
     print(f'{s.bag}: {s.frames} frames of {s.image_topic} ({s.skipped} skipped), '
           f'{s.keyframes} keyframes, coverage {s.coverage:.2f}, intrinsics {calib}')  # fmt: skip
-    sfm = s.recon.results.get('sfm') if s.recon else None
+    sfm = s.recon.sparse if s.recon else None
     if sfm:
-        error = sfm.get('mean_reprojection_error_px', float('nan'))
-        print(f'registered {sfm.get("registered")}/{s.keyframes} keyframes, '
-              f'reprojection {error:.2f} px')  # fmt: skip
+        print(f'registered {sfm.registered}/{s.keyframes} keyframes, '
+              f'reprojection {sfm.mean_reprojection_error_px:.2f} px')  # fmt: skip
     if s.report is not None:
         scale = s.report['scale']
         rel = scale.get('rel_uncertainty')

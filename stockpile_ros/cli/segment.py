@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
-from typing import Any
 
+from ..artefacts import MeshInfo, ScaleRecord, load
 from ..errors import StockpileError
 from ..meshcheck import UNITS, read_mesh
 from ..segment.pipeline import analyse_mesh
@@ -75,18 +74,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameter_arguments(parser, _ALIASES)
 
 
-def _read_info(path: Path | None) -> dict[str, Any] | None:
-    if path is None:
-        return None
-    try:
-        info = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise StockpileError(f'cannot read mesh info {path}: {exc}') from exc
-    if not isinstance(info, dict) or info.get('schema') != 'stockpile-mesh/1':
-        raise StockpileError(f'{path}: not a stockpile-mesh/1 file')
-    return info
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     settings = settings_from_args(args)
@@ -96,11 +83,10 @@ def run(args: argparse.Namespace) -> int:
         raise StockpileError(
             f'{check.warnings[-1]}; pass{hint} to scale it, or --units m to keep it as it is'
         )
-    info = _read_info(args.mesh_info)
+    info = None if args.mesh_info is None else load(MeshInfo, args.mesh_info)
     if info is None and args.units is not None:
         # The user vouches for the mesh's units: metric, though no target or odometry says so.
-        info = {'scale': {'method': 'given', 'metres_per_unit': UNITS[args.units],
-                          'rel_uncertainty': None}}  # fmt: skip
+        info = MeshInfo(ScaleRecord('given', UNITS[args.units]), units='m')
     spec = class_spec(settings)
     options = report_options(settings.values)
     analysis = analyse_mesh(

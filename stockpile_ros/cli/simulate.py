@@ -7,10 +7,10 @@ import math
 from dataclasses import replace
 
 from ..errors import StockpileError
-from ..sim.camera_path import PathConfig
-from ..sim.pile import PileConfig, parse_gradation
-from ..sim.record import SimulationConfig, simulate
-from ..sim.scene import SceneConfig
+from ..tools.sim.camera_path import PathConfig
+from ..tools.sim.pile import PileConfig, parse_gradation
+from ..tools.sim.record import SimulationConfig, simulate
+from ..tools.sim.scene import SceneConfig
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
 

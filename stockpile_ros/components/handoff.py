@@ -17,12 +17,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from ..bagio.images import decode_image
-from ..bagio.reader import camera_model_from_msg, message_stamp_ns
+from ..artefacts import KeyframeRecord, OdometryEntry
 from ..camera import CameraModel, Frame
 from ..meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
-from ..messages import MessageFactory, camera_info, header, pose
-from ..recon.keyframes import KeyframeRecord
+from ..ros.convert import camera_model_from_msg, message_stamp_ns
+from ..ros.images import decode_image
+from ..ros.messages import MessageFactory, camera_info, header, pose
 
 __all__ = [
     'ReceivedKeyframe',
@@ -89,8 +89,11 @@ def keyframe_message(
     """
     stamp = record.stamp_ns
     fmt, data = image
-    odo = record.odometry or {}
-    has_camera_pose = 'camera_position' in odo
+    odo = record.odometry
+    base = (odo.position, odo.orientation_xyzw) if odo is not None else None
+    camera_pose = None
+    if odo is not None and odo.camera_position is not None and odo.camera_orientation_xyzw:
+        camera_pose = (odo.camera_position, odo.camera_orientation_xyzw)
     cam: CameraModel | None = record.camera
     zero = ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
     return f.cls('stockpile_msgs/msg/Keyframe')(
@@ -108,19 +111,12 @@ def keyframe_message(
             if cam is not None
             else _empty_camera_info(f, stamp, frame_id)
         ),
-        has_odometry=bool(odo),
-        odom_frame_id=str(odo.get('frame_id', '')),
-        base_frame_id=str(odo.get('child_frame_id', '')),
-        base_pose=pose(f, *((odo['position'], odo['orientation_xyzw']) if odo else zero)),
-        has_camera_pose=has_camera_pose,
-        camera_pose=pose(
-            f,
-            *(
-                (odo['camera_position'], odo['camera_orientation_xyzw'])
-                if has_camera_pose
-                else zero
-            ),
-        ),
+        has_odometry=odo is not None,
+        odom_frame_id=odo.frame_id if odo is not None else '',
+        base_frame_id=odo.child_frame_id if odo is not None else '',
+        base_pose=pose(f, *(base or zero)),
+        has_camera_pose=camera_pose is not None,
+        camera_pose=pose(f, *(camera_pose or zero)),
     )
 
 
@@ -139,7 +135,7 @@ class ReceivedKeyframe:
 
     index: int
     frame: Frame
-    odometry: dict[str, Any] | None
+    odometry: OdometryEntry | None
     reason: str
     sharpness: float
 
@@ -162,17 +158,17 @@ def read_keyframe(msg: Any, max_pixels: int) -> ReceivedKeyframe:
     """
     image = decode_image(msg.image, max_pixels)
     camera = camera_model_from_msg(msg.camera_info) if msg.has_camera_info else None
-    odometry: dict[str, Any] | None = None
+    odometry = None
     if msg.has_odometry:
-        odometry = {
-            'position': _xyz(msg.base_pose.position),
-            'orientation_xyzw': _xyzw(msg.base_pose.orientation),
-            'frame_id': str(msg.odom_frame_id),
-            'child_frame_id': str(msg.base_frame_id),
-        }
+        odometry = OdometryEntry(
+            position=_xyz(msg.base_pose.position),
+            orientation_xyzw=_xyzw(msg.base_pose.orientation),
+            frame_id=str(msg.odom_frame_id),
+            child_frame_id=str(msg.base_frame_id),
+        )
         if msg.has_camera_pose:
-            odometry['camera_position'] = _xyz(msg.camera_pose.position)
-            odometry['camera_orientation_xyzw'] = _xyzw(msg.camera_pose.orientation)
+            odometry.camera_position = _xyz(msg.camera_pose.position)
+            odometry.camera_orientation_xyzw = _xyzw(msg.camera_pose.orientation)
     stamp = message_stamp_ns(msg, 0)
     frame = Frame(stamp, image, str(msg.header.frame_id), camera, '', int(msg.frame_index))
     return ReceivedKeyframe(int(msg.index), frame, odometry, str(msg.reason), float(msg.sharpness))

@@ -17,16 +17,16 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from .. import topics
-from ..bagio.images import ImageError, decode_image
-from ..bagio.reader import CameraInfoError, camera_model_from_msg, message_stamp_ns
+from ..artefacts import WorkFolder
 from ..camera import CameraModel, Frame
-from ..messages import MessageFactory
-from ..publish import Publication, diagnostics, keyframe_status
 from ..recon.collector import KeyframeCollector, OdometryBuffer
 from ..recon.keyframes import Decision
-from ..recon.pipeline import WorkFolder
 from ..recon.transforms import valid_pose
+from ..ros import topics
+from ..ros.convert import CameraInfoError, camera_model_from_msg, message_stamp_ns
+from ..ros.images import ImageError, decode_image
+from ..ros.messages import MessageFactory
+from ..ros.publications import Publication, diagnostics, keyframe_status
 from ..settings import Settings
 from .handoff import keyframe_image, keyframe_message
 
@@ -34,9 +34,10 @@ __all__ = ['WAIT_NS', 'KeyframeComponent', 'KeyframeCounts']
 
 WAIT_NS = 2_000_000_000
 """How far the camera's stamps may run ahead of a kept frame's odometry, transforms and
-CameraInfo before it goes out with what is known [ns]. Stream time, not a measurement rule: live,
-one node's callbacks take the camera's messages before queued odometry (0.2 s behind was seen
-under load), and a recording without odometry waits this long per keyframe.
+CameraInfo before it goes out with what is known [ns]. Stream time, not a measurement rule: a
+recording without odometry waits this long per keyframe. Live, the keyframe node queues every
+topic in arrival order (``nodes.common.Inbox``), so the odometry is not held back behind a burst
+of images and the wait runs out only when a stream is missing.
 """
 
 
@@ -182,6 +183,17 @@ class KeyframeComponent:
         out = self._resolve(final=False)
         out.append(self.status(stamp))
         return out
+
+    def on_dropped(self, count: int, log_ns: int) -> list[Publication]:
+        """Count frames a live node had to drop because it fell behind the camera."""
+        if not count:
+            return []
+        reason = 'the keyframe node fell behind the camera'
+        self.counts.skipped[reason] = self.counts.skipped.get(reason, 0) + count
+        return self._note('camera:behind', 'WARN',
+                          f'{reason}: frames dropped (a slower computer? fewer pixels with '
+                          'recon.max_image_pixels); later drops are counted in the summary',
+                          log_ns)  # fmt: skip
 
     def _camera(self, frame: Frame) -> tuple[CameraModel | None, list[Publication]]:
         """Return the CameraInfo nearest the frame's stamp if it fits the image, and why not."""

@@ -14,20 +14,20 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from .. import topics
-from ..bagio.images import ImageError
-from ..bagio.reader import CameraInfoError
-from ..messages import MessageFactory
-from ..publish import (
+from ..artefacts import WorkFolder
+from ..recon.collector import CollectorState
+from ..recon.keyframes import KeyframeStore
+from ..ros import topics
+from ..ros.convert import CameraInfoError
+from ..ros.images import ImageError
+from ..ros.messages import MessageFactory
+from ..ros.publications import (
     Publication,
     diagnostics,
     reconstruction_diagnostics,
     reconstruction_outputs,
     status,
 )
-from ..recon.collector import CollectorState
-from ..recon.keyframes import KeyframeStore
-from ..recon.pipeline import WorkFolder
 from ..runner import RECON_STAGES, Outcome, run_reconstruction
 from ..settings import Settings
 from .handoff import read_keyframe, surface_message

@@ -12,10 +12,16 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..messages import MessageFactory
-from ..publish import Publication, capture_warnings, diagnostics, segmentation_outputs, status
+from ..artefacts import WorkFolder
 from ..recon.collector import CollectorState
-from ..recon.pipeline import WorkFolder
+from ..ros.messages import MessageFactory
+from ..ros.publications import (
+    Publication,
+    capture_warnings,
+    diagnostics,
+    segmentation_outputs,
+    status,
+)
 from ..runner import Outcome, run_segmentation
 from ..segment.provenance import Provenance
 from ..settings import Settings

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import array
 import threading
+import traceback
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -22,13 +24,14 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import try_shutdown
 
-from .. import topics
 from ..errors import StockpileError
-from ..publish import Publication
+from ..ros import topics
+from ..ros.publications import Publication
 from ..settings import Setting, Settings, build_settings, settings_for
 from .interfaces import get_message
 
 __all__ = [
+    'Inbox',
     'Publishers',
     'RclpyFactory',
     'SingleRun',
@@ -84,8 +87,75 @@ class SingleRun:
         return thread is None or not thread.is_alive()
 
 
+class Inbox:
+    """Work in arrival order, done one item at a time by a thread of its own.
+
+    The subscriptions' callbacks only queue, so the executor takes every topic at the rate it
+    comes: rclpy takes one message per subscription per wait, and while image callbacks decoded
+    and selected, 30 Hz odometry fell seconds behind 10 Hz images at the start of a pass (its
+    keyframes went out without a pose). Queued in arrival order, the component sees the topics
+    interleaved as they were published, as a replay does from the bag.
+
+    Args:
+        max_droppable: Droppable items (camera frames) kept waiting; the oldest one goes when
+            another comes, as a full subscription queue would drop it.
+        logger: Where an item that raised is reported (the thread goes on with the next).
+
+    """
+
+    def __init__(self, max_droppable: int, logger: Any) -> None:
+        self.max_droppable = max_droppable
+        self._logger = logger
+        self.dropped = 0
+        self._items: deque[tuple[Callable[[], None], bool]] = deque()
+        self._cond = threading.Condition()
+        self._busy = False
+        self._open = True
+        self._thread = threading.Thread(target=self._work, daemon=True)
+        self._thread.start()
+
+    def put(self, work: Callable[[], None], droppable: bool = False) -> None:
+        """Queue ``work``; a droppable item beyond ``max_droppable`` drops the oldest one."""
+        with self._cond:
+            self._items.append((work, droppable))
+            if droppable and sum(d for _, d in self._items) > self.max_droppable:
+                oldest = next(i for i, (_, d) in enumerate(self._items) if d)
+                del self._items[oldest]
+                self.dropped += 1
+            self._cond.notify_all()
+
+    def drain(self, timeout_s: float) -> bool:
+        """Wait until everything queued has been done; return whether it has."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self._items and not self._busy, timeout_s)
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Do what is queued, then stop the thread."""
+        with self._cond:
+            self._open = False
+            self._cond.notify_all()
+        self._thread.join(timeout_s)
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._items or not self._open)
+                if not self._items:
+                    return
+                work, _ = self._items.popleft()
+                self._busy = True
+            try:
+                work()
+            except Exception:  # one bad message must not stop the node
+                self._logger.error(traceback.format_exc())
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+
 class RclpyFactory:
-    """Message factory over the rclpy message packages (see stockpile_ros.messages)."""
+    """Message factory over the rclpy message packages (see stockpile_ros.ros.messages)."""
 
     def cls(self, msgtype: str) -> Any:
         """Return the rclpy class of ``pkg/msg/Name``."""

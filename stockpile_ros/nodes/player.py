@@ -19,10 +19,10 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.utilities import remove_ros_args, try_shutdown
 
-from .. import topics
 from ..bagio.reader import BagReader
 from ..errors import StockpileError
 from ..playback import INPUTS, PlayStats, input_topics, parse_mapping, play, to_message, wait_until
+from ..ros import topics
 from .common import qos_profile
 from .interfaces import get_message
 

@@ -8,9 +8,9 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from .. import topics
 from ..components import ReconstructionComponent
-from ..publish import diagnostics
+from ..ros import topics
+from ..ros.publications import diagnostics
 from .common import (
     Publishers,
     RclpyFactory,

@@ -6,9 +6,9 @@ from typing import Any
 
 from rclpy.node import Node
 
-from .. import topics
 from ..components import SegmentationComponent
-from ..publish import diagnostics
+from ..ros import topics
+from ..ros.publications import diagnostics
 from .common import (
     Publishers,
     RclpyFactory,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
-from .pipeline import STAGES, ReconOptions, WorkFolder, reconstruct
+from ..artefacts import WorkFolder
+from .options import ReconOptions
+from .pipeline import STAGES, reconstruct
 
 __all__ = ['STAGES', 'ReconOptions', 'WorkFolder', 'reconstruct']

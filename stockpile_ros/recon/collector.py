@@ -25,8 +25,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from ..artefacts import KeyframeRecord, OdometryEntry
 from ..camera import Frame
-from .keyframes import Decision, KeyframeRecord, KeyframeSelector, KeyframeStore, SelectorOptions
+from .keyframes import Decision, KeyframeSelector, KeyframeStore, SelectorOptions
 from .transforms import MAX_GAP_NS, PoseSeries, TransformTree, odometry_entry
 
 __all__ = [
@@ -46,15 +47,15 @@ def _yaw(quat_xyzw: Any) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def camera_orientation(odometry: dict[str, Any] | None) -> npt.NDArray[np.float64] | None:
+def camera_orientation(odometry: OdometryEntry | None) -> npt.NDArray[np.float64] | None:
     """Camera-to-world rotation of a ``keyframes.jsonl`` odometry entry, None without a camera.
 
     Only the camera's own orientation (``camera_orientation_xyzw``, placed by the transforms from
     the odometry's base to the camera) counts: the base turns with the cart, not with a mast.
     """
-    if odometry is None or 'camera_orientation_xyzw' not in odometry:
+    if odometry is None or odometry.camera_orientation_xyzw is None:
         return None
-    return np.asarray(Rotation.from_quat(odometry['camera_orientation_xyzw']).as_matrix())
+    return np.asarray(Rotation.from_quat(odometry.camera_orientation_xyzw).as_matrix())
 
 
 def heading_coverage(yaws: list[float]) -> float:
@@ -116,9 +117,7 @@ class KeyframeCollector:
         self.state = CollectorState(keyframes=len(self.store.records))
         self._parallax = 0.0
         self._yaws = [
-            _yaw(r.odometry['orientation_xyzw'])
-            for r in self.store.records
-            if r.odometry is not None and 'orientation_xyzw' in r.odometry
+            _yaw(r.odometry.orientation_xyzw) for r in self.store.records if r.odometry is not None
         ]
         if self.store.records:
             last = self.store.records[-1]
@@ -134,7 +133,7 @@ class KeyframeCollector:
             self.state.coverage = min(1.0, self._parallax / self.full_parallax)
             self.state.coverage_source = 'parallax'
 
-    def select(self, frame: Frame, odometry: dict[str, Any] | None = None) -> Decision:
+    def select(self, frame: Frame, odometry: OdometryEntry | None = None) -> Decision:
         """Offer one frame to the selector and count its decision; nothing is stored yet.
 
         A live stream stores an accepted frame once its odometry is known (:meth:`keep`).
@@ -154,7 +153,7 @@ class KeyframeCollector:
         return decision
 
     def keep(
-        self, frame: Frame, decision: Decision, odometry: dict[str, Any] | None = None
+        self, frame: Frame, decision: Decision, odometry: OdometryEntry | None = None
     ) -> KeyframeRecord:
         """Store an accepted frame as the next keyframe, with its odometry entry (or None)."""
         record = self.store.add(frame, odometry=odometry, reason=decision.reason,
@@ -162,12 +161,12 @@ class KeyframeCollector:
         self.state.keyframes = len(self.store.records)
         if math.isfinite(decision.parallax):
             self._parallax += decision.parallax
-        if odometry is not None and 'orientation_xyzw' in odometry:
-            self._yaws.append(_yaw(odometry['orientation_xyzw']))
+        if odometry is not None:
+            self._yaws.append(_yaw(odometry.orientation_xyzw))
         self._update_coverage()
         return record
 
-    def push(self, frame: Frame, odometry: dict[str, Any] | None = None) -> Decision:
+    def push(self, frame: Frame, odometry: OdometryEntry | None = None) -> Decision:
         """Offer one frame; store it at once when it is a keyframe (odometry known up front).
 
         Args:
@@ -237,7 +236,7 @@ class OdometryBuffer:
         return not camera_frame or self.tree.covers(self._frames[1].lstrip('/'), camera_frame,
                                                     stamp_ns)  # fmt: skip
 
-    def at(self, stamp_ns: int, camera_frame: str = '') -> dict[str, Any] | None:
+    def at(self, stamp_ns: int, camera_frame: str = '') -> OdometryEntry | None:
         """Return the ``keyframes.jsonl`` odometry entry at ``stamp_ns``.
 
         None unless samples on both sides lie within ``max_gap_ns`` of each other. With

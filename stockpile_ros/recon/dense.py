@@ -14,7 +14,6 @@ With a CUDA build of pycolmap, COLMAP's PatchMatch stereo and fusion are used in
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -25,6 +24,7 @@ import numpy.typing as npt
 import open3d as o3d
 import pycolmap
 
+from ..artefacts import DenseSummary, from_json, save
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..progress import progress
@@ -518,7 +518,7 @@ def run_dense(
     order: list[str],
     out_dir: Path,
     options: DenseOptions,
-) -> dict[str, Any]:
+) -> DenseSummary:
     """Compute the dense cloud and write ``dense.ply`` and ``dense.json`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     if options.use_gpu and bool(getattr(pycolmap, 'has_cuda', False)):
@@ -531,5 +531,6 @@ def run_dense(
     else:
         cloud, stats = dense_cloud(image_dir, model, order, options)
     o3d.io.write_point_cloud(out_dir / 'dense.ply', cloud, write_ascii=False)
-    (out_dir / 'dense.json').write_text(json.dumps(stats, indent=1) + '\n')
-    return stats
+    summary = from_json(DenseSummary, stats, 'dense')
+    save(summary, out_dir / 'dense.json')
+    return summary

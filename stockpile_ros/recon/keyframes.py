@@ -22,10 +22,9 @@ and Structure-from-Motion registered 2 of 10.
 
 from __future__ import annotations
 
-import json
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, NamedTuple
 
@@ -33,17 +32,15 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from ..artefacts import ArtefactError, KeyframeRecord, OdometryEntry
 from ..camera import CameraModel, Frame
 from ..ranges import Range
 
 __all__ = [
     'Decision',
-    'KeyframeRecord',
     'KeyframeSelector',
     'KeyframeStore',
     'SelectorOptions',
-    'camera_from_dict',
-    'camera_to_dict',
     'view_angle_change',
 ]
 
@@ -382,88 +379,6 @@ class KeyframeSelector:
         return decide(False, 'no-parallax')
 
 
-def camera_to_dict(camera: CameraModel) -> dict[str, Any]:
-    """JSON form of a camera model (as in ``keyframes.jsonl``)."""
-    return {
-        'width': camera.width,
-        'height': camera.height,
-        'k': [float(v) for v in np.asarray(camera.k).ravel()],
-        'd': [float(v) for v in np.asarray(camera.d).ravel()],
-        'distortion_model': camera.distortion_model,
-        'frame_id': camera.frame_id,
-    }
-
-
-def camera_from_dict(data: dict[str, Any]) -> CameraModel:
-    """Inverse of :func:`camera_to_dict`."""
-    return CameraModel(
-        width=int(data['width']),
-        height=int(data['height']),
-        k=np.asarray(data['k'], dtype=np.float64).reshape(3, 3),
-        d=np.asarray(data.get('d', []), dtype=np.float64),
-        distortion_model=str(data.get('distortion_model', 'plumb_bob')),
-        frame_id=str(data.get('frame_id', 'camera_optical_frame')),
-    )
-
-
-@dataclass
-class KeyframeRecord:
-    """One line of ``keyframes.jsonl``.
-
-    Attributes:
-        file: PNG file name inside ``keyframes/``.
-        stamp_ns: Stamp of the frame [ns].
-        index: Index of the frame in its source.
-        camera: Camera model from CameraInfo, None when the source has none.
-        odometry: Odometry pose at the stamp (``position``, ``orientation_xyzw``, ``frame_id``,
-            ``child_frame_id``), None when there is no odometry.
-        reason: Why it was kept.
-        sharpness: Variance of the Laplacian on the working copy.
-
-    """
-
-    file: str
-    stamp_ns: int
-    index: int
-    camera: CameraModel | None = None
-    odometry: dict[str, Any] | None = None
-    reason: str = ''
-    sharpness: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_json(self) -> str:
-        """One JSON line."""
-        return json.dumps(
-            {
-                'file': self.file,
-                'stamp_ns': int(self.stamp_ns),
-                'index': int(self.index),
-                'camera': None if self.camera is None else camera_to_dict(self.camera),
-                'odometry': self.odometry,
-                'reason': self.reason,
-                'sharpness': round(self.sharpness, 3),
-                **self.extra,
-            }
-        )
-
-    @classmethod
-    def from_json(cls, line: str) -> KeyframeRecord:
-        """Parse one JSON line."""
-        data = json.loads(line)
-        cam = data.pop('camera', None)
-        known = {'file', 'stamp_ns', 'index', 'odometry', 'reason', 'sharpness'}
-        return cls(
-            file=str(data['file']),
-            stamp_ns=int(data['stamp_ns']),
-            index=int(data.get('index', 0)),
-            camera=None if cam is None else camera_from_dict(cam),
-            odometry=data.get('odometry'),
-            reason=str(data.get('reason', '')),
-            sharpness=float(data.get('sharpness', 0.0)),
-            extra={k: v for k, v in data.items() if k not in known},
-        )
-
-
 class KeyframeStore:
     """The ``keyframes/`` folder: PNGs plus ``keyframes.jsonl``, appended as frames are accepted.
 
@@ -484,8 +399,8 @@ class KeyframeStore:
             for line in self.index_path.read_text().splitlines():
                 # A line cut short by a crash is dropped; its image is rewritten if seen again.
                 try:
-                    record = KeyframeRecord.from_json(line)
-                except (ValueError, KeyError):
+                    record = KeyframeRecord.from_line(line)
+                except (ValueError, KeyError, ArtefactError):
                     continue
                 if (self.folder / record.file).exists():
                     self.records.append(record)
@@ -506,7 +421,7 @@ class KeyframeStore:
         self,
         frame: Frame,
         *,
-        odometry: dict[str, Any] | None = None,
+        odometry: OdometryEntry | None = None,
         reason: str = '',
         sharpness: float = 0.0,
     ) -> KeyframeRecord:
@@ -529,7 +444,7 @@ class KeyframeStore:
             sharpness=sharpness,
         )
         with self.index_path.open('a') as out:
-            out.write(record.to_json() + '\n')
+            out.write(record.to_line() + '\n')
             out.flush()
         self.records.append(record)
         return record

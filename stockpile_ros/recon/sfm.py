@@ -11,7 +11,7 @@ half a pixel on the way in and out.
 
 from __future__ import annotations
 
-import json
+import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,12 +22,12 @@ import numpy.typing as npt
 import pycolmap
 from PIL import Image
 
+from ..artefacts import KeyframeRecord, ModelImages, SparseSummary, save
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..ranges import Range
-from .keyframes import KeyframeRecord
 
-__all__ = ['SfmOptions', 'SparseModel', 'View', 'load_sparse', 'run_sfm']
+__all__ = ['SfmOptions', 'SparseModel', 'View', 'focal_uncertainty', 'load_sparse', 'run_sfm']
 
 
 @dataclass(frozen=True)
@@ -277,7 +277,7 @@ def run_sfm(
     *,
     priors: dict[str, float] | None = None,
     unordered: bool = False,
-) -> dict[str, Any]:
+) -> SparseSummary:
     """Reconstruct the keyframes; writes the model and ``sparse.json`` into ``out_dir``.
 
     Args:
@@ -435,38 +435,38 @@ def run_sfm(
     ranked = sorted(models.values(), key=lambda rec: -rec.num_reg_images())
     best = ranked[0]
     registered = int(best.num_reg_images())
-    report: dict[str, Any] = {
-        'registered': registered,
-        'total': len(names),
-        'registered_fraction': registered / len(names),
-        'models': len(models),
-        'points': int(best.num_points3D()),
-        'mean_reprojection_error_px': float(best.compute_mean_reprojection_error()),
-        'mean_features': mean_features,
-        'camera': _camera_text(fixed, with_prior, len(names)),
-        'cameras': [_camera_report(cam) for cam in best.cameras.values()],
-        'matcher': matcher,
-        'matcher_note': matcher_note,
-        'mapper': options.mapper,
-        'unregistered': sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
+    report = SparseSummary(
+        registered=registered,
+        total=len(names),
+        registered_fraction=registered / len(names),
+        models=len(models),
+        points=int(best.num_points3D()),
+        mean_reprojection_error_px=float(best.compute_mean_reprojection_error()),
+        mean_features=mean_features,
+        camera=_camera_text(fixed, with_prior, len(names)),
+        cameras=[_camera_report(cam) for cam in best.cameras.values()],
+        matcher=matcher,
+        matcher_note=matcher_note,
+        mapper=options.mapper,
+        unregistered=sorted(set(names) - {best.image(i).name for i in best.reg_image_ids()}),
         # Every model, the largest (the one kept) first: which keyframes landed where (also what
         # the registration gate reads).
-        'model_images': [
-            {
-                'registered': int(rec.num_reg_images()),
-                'images': sorted(rec.image(i).name for i in rec.reg_image_ids()),
-            }
+        model_images=[
+            ModelImages(
+                int(rec.num_reg_images()), sorted(rec.image(i).name for i in rec.reg_image_ids())
+            )
             for rec in ranked
         ],
-    }
-    report['median_triangulation_angle_deg'] = _median_triangulation_angle(best)
+        median_triangulation_angle_deg=_median_triangulation_angle(best),
+        focal_rel_uncertainty=None if fixed else focal_uncertainty(best),
+    )
     best.write(out_dir)
-    (out_dir / 'sparse.json').write_text(json.dumps(report, indent=1) + '\n')
-    if report['median_triangulation_angle_deg'] < options.min_triangulation_angle:
+    save(report, out_dir / 'sparse.json')
+    if report.median_triangulation_angle_deg < options.min_triangulation_angle:
         raise CaptureError(
             'sfm',
             'the keyframes see the scene from nearly one place (median triangulation angle '
-            f'{report["median_triangulation_angle_deg"]:.1f} degrees): depth cannot be measured '
+            f'{report.median_triangulation_angle_deg:.1f} degrees): depth cannot be measured '
             'from a rotation on the spot',
             advice_more,
         )
@@ -489,6 +489,43 @@ def _camera_report(camera: pycolmap.Camera) -> dict[str, Any]:
         'params': [float(v) for v in camera.params],
         'prior_focal_length': bool(camera.has_prior_focal_length),
     }
+
+
+def focal_uncertainty(rec: pycolmap.Reconstruction) -> float | None:
+    """Relative standard deviation of the focal length bundle adjustment refined, the worst camera.
+
+    The covariance of the camera parameters is the inverse of the bundle adjustment's normal
+    equations (three points fix the model's free similarity) for residuals of 1 px, scaled by the
+    model's own residual variance per image coordinate (from each point's mean reprojection
+    error). A self-calibrated focal length off by some share changes the depth of every point
+    against its width by about as much, and with it a scale measured on a target and carried to
+    the rest of the model.
+
+    Returns:
+        The share, or None when the covariance cannot be computed (a degenerate model).
+
+    """
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in rec.reg_image_ids():
+        config.add_image(image_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.THREE_POINTS)
+    adjuster = pycolmap.create_default_ceres_bundle_adjuster(
+        pycolmap.BundleAdjustmentOptions(), config, rec
+    )
+    options = pycolmap.BACovarianceOptions()
+    options.params = pycolmap.BACovarianceOptionsParams.ALL
+    covariance = pycolmap.estimate_ba_covariance(options, rec, adjuster)
+    errors = np.array([p.error for p in rec.points3D.values()], dtype=np.float64)
+    if covariance is None or not errors.size:
+        return None
+    variance = float(np.mean(errors**2)) / 2
+    shares = []
+    for camera in rec.cameras.values():
+        block = covariance.get_other_params_cov(camera.params)
+        # The focal length is the first refined parameter of every model run_sfm refines.
+        if block is not None and block.size and block[0, 0] > 0:
+            shares.append(math.sqrt(float(block[0, 0]) * variance) / float(camera.params[0]))
+    return max(shares) if shares else None
 
 
 def load_sparse(sparse_dir: Path) -> SparseModel:

@@ -14,9 +14,9 @@ import numpy as np
 import numpy.typing as npt
 from PIL import ImageOps
 
-from ..bagio.images import DEFAULT_MAX_PIXELS, ImageError, check_pixels, image_size
 from ..camera import Frame
 from ..errors import StockpileError
+from ..ros.images import DEFAULT_MAX_PIXELS, ImageError, check_pixels, image_size
 from .exif import HEIF_SUFFIXES, open_photo
 
 __all__ = ['IMAGE_SUFFIXES', 'VIDEO_SUFFIXES', 'iter_frames', 'photo_files', 'source_kind']

@@ -15,6 +15,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation, Slerp
 
+from ..artefacts import OdometryEntry
+
 __all__ = [
     'MAX_GAP_NS',
     'PoseSeries',
@@ -187,25 +189,25 @@ def odometry_entry(
     base_frame: str,
     camera_frame: str,
     stamp_ns: int,
-) -> dict[str, Any]:
+) -> OdometryEntry:
     """Return the ``keyframes.jsonl`` odometry entry of a base pose at ``stamp_ns``.
 
     ``camera_position`` and ``camera_orientation_xyzw`` (the camera's optical frame in the
     odometry frame) are present only when ``tree`` links ``camera_frame`` to ``base_frame``: the
     base's own position is never a camera centre.
     """
-    entry: dict[str, Any] = {
-        'position': [float(v) for v in np.asarray(position, dtype=np.float64)],
-        'orientation_xyzw': [float(v) for v in np.asarray(quat_xyzw, dtype=np.float64)],
-        'frame_id': frame_id,
-        'child_frame_id': base_frame,
-    }
+    entry = OdometryEntry(
+        position=[float(v) for v in np.asarray(position, dtype=np.float64)],
+        orientation_xyzw=[float(v) for v in np.asarray(quat_xyzw, dtype=np.float64)],
+        frame_id=frame_id,
+        child_frame_id=base_frame,
+    )
     if not camera_frame:
         return entry
     base_to_camera = tree.chain(base_frame.lstrip('/'), camera_frame, stamp_ns)
     if base_to_camera is not None:
         cam = pose_matrix(position, quat_xyzw) @ base_to_camera
-        entry['camera_position'] = [float(v) for v in cam[:3, 3]]
+        entry.camera_position = [float(v) for v in cam[:3, 3]]
         quat = Rotation.from_matrix(cam[:3, :3]).as_quat()
-        entry['camera_orientation_xyzw'] = [float(v) for v in quat]
+        entry.camera_orientation_xyzw = [float(v) for v in quat]
     return entry

@@ -12,6 +12,7 @@ import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.transform import Rotation
 
+from ..artefacts import MeshInfo, to_json
 from .gradation import gradation
 from .measure import MeasureParams, RockMeasure, measure_rocks, solid_axes, visibility_warnings
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
@@ -55,16 +56,16 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-def _reconstruction_warnings(info: dict[str, Any]) -> list[str]:
+def _reconstruction_warnings(info: MeshInfo) -> list[str]:
     """Return what ``mesh.json`` says went wrong upstream, in words for report.json."""
     out = []
-    off = info.get('keyframes_off_path') or []
+    off = info.keyframes_off_path
     if off:
         out.append(
             f'{len(off)} keyframes were left out: Structure-from-Motion placed them far from '
             f'where odometry puts the camera (repeating texture?): {", ".join(off)}.'
         )
-    rejected = (info.get('scale_details') or {}).get('odometry', {}).get('rejected')
+    rejected = info.scale_details.get('odometry', {}).get('rejected')
     if rejected:
         out.append(f'Odometry was not used for the scale: {rejected}.')
     return out
@@ -115,7 +116,7 @@ def analyse_mesh(
     seg_params: SegmentParams | None = None,
     measure_params: MeasureParams | None = None,
     spec: dict[str, Any] | None = None,
-    mesh_info: dict[str, Any] | None = None,
+    mesh_info: MeshInfo | None = None,
     source: str = '',
     report_options: ReportOptions | None = None,
 ) -> Analysis:
@@ -128,7 +129,8 @@ def analyse_mesh(
         seg_params: Segmentation parameters (``default`` preset if None).
         measure_params: Measurement parameters (defaults if None).
         spec: A class of the class table to check the gradation against, or None.
-        mesh_info: The mesh.json dict of the reconstruction (scale, keyframes, frame), or None.
+        mesh_info: What the reconstruction says of the mesh (scale, keyframes, frame); None:
+            model units.
         source: Where the mesh came from, recorded in the report.
         report_options: Intervals (resamples, confidence, seed) and the Rosin-Rammler fit.
 
@@ -141,9 +143,8 @@ def analyse_mesh(
     sp = seg_params or SegmentParams()
     mp = measure_params or MeasureParams()
     opts = report_options or ReportOptions()
-    info = mesh_info or {}
-    scale = info.get('scale') or {'method': 'none', 'metres_per_unit': 1.0, 'rel_uncertainty': None}
-    metric = scale.get('method') != 'none'
+    info = mesh_info or MeshInfo()
+    metric = info.scale.metric
     t0 = time.perf_counter()
     # A class's sizes are metres: in model units they would set a meaningless smallest rock.
     seg = segment_mesh(v, f, sp, spec if metric else None)
@@ -151,7 +152,7 @@ def analyse_mesh(
     rocks = measure_rocks(v, seg, mp)
     sizes, masses = [r.b for r in rocks], [r.mass for r in rocks]
     grad = gradation(sizes, masses, 'b', spec if metric else None)
-    intervals = bootstrap_intervals(sizes, masses, scale.get('rel_uncertainty'), opts)
+    intervals = bootstrap_intervals(sizes, masses, info.scale.rel_uncertainty, opts)
     grad['intervals'] = intervals
     grad['spec'] = decide(grad, spec, intervals) if metric else refuse(spec)
     grad['rosin_rammler'] = rosin_rammler(grad) if opts.rosin_rammler else None
@@ -168,10 +169,10 @@ def analyse_mesh(
         grad['total_mass'] = None
     report: dict[str, Any] = {
         'schema': REPORT_SCHEMA,
-        'frame_id': info.get('frame_id', 'stockpile'),
+        'frame_id': info.frame_id,
         'units': 'm' if metric else 'model',
-        'scale': scale,
-        'keyframes': list(info.get('keyframes', [])),
+        'scale': to_json(info.scale),
+        'keyframes': to_json(info.keyframes),
         'rocks': rock_dicts,
         'gradation': grad,
         'segmentation': {

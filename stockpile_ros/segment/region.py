@@ -14,7 +14,7 @@ the seeds, ``v_k`` points first to seed ``k`` and then to ``v_{k+1}``; a depth-f
 ``v_0`` finishes everything seed ``k`` reaches before it moves on to ``v_{k+1}``, so the run of a
 face
 is the number of virtual nodes before it in the discovery order. The labels equal those of the
-per-face search in :mod:`stockpile_ros.segment.bfs` exactly (tested), at compiled speed.
+per-face search in :mod:`stockpile_ros.tools.reference_bfs` exactly (tested), at compiled speed.
 """
 
 from __future__ import annotations

@@ -89,6 +89,10 @@ I32 = npt.NDArray[np.int32]
 #: degenerate mesh (a tiny median edge) or a large rock of interest on a fine mesh cannot make it
 #: run for ever.
 MAX_SMOOTHING_PASSES = 2 * 32**2
+#: Cells across a smoothing radius in ``valley_depths``'s coarse graph, and the least cell (in
+#: median edge lengths) for which the coarse graph is used instead of the mesh.
+COARSE_CELLS = 3.0
+COARSE_MIN_EDGES = 1.5
 #: The least ``min_rock_edges`` can be set to: a rock under this many median edge lengths across
 #: cannot be told from mesh noise even on a noise-free mesh.
 RESOLVABLE_EDGES = 4.0
@@ -401,6 +405,77 @@ def smoothing_passes(radius: float, edge: float) -> int:
     return max(1, round(2.0 * ratio**2))
 
 
+def _neighbour_mean(i: npt.NDArray[np.int64], j: npt.NDArray[np.int64], n: int) -> Any:
+    """Return the matrix that replaces each of ``n`` vertices by the mean of its neighbours.
+
+    Args:
+        i: One end of every edge (an edge may come more than once).
+        j: The other end.
+        n: Number of vertices.
+
+    """
+    # Duplicates are summed: the matrix only marks neighbours.
+    link = sparse.csr_matrix(
+        (np.ones(2 * len(i)), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)
+    )
+    # Each row divided by its count of neighbours, in place (a product with a diagonal matrix
+    # would build the matrix again).
+    degree = np.diff(link.indptr)
+    link.data[:] = np.repeat(1.0 / np.maximum(degree, 1), degree)
+    return link
+
+
+def _coarse_smooth(
+    vertices: F64,
+    i: npt.NDArray[np.int64],
+    j: npt.NDArray[np.int64],
+    radius: float,
+    cell: float,
+    spread: float,
+) -> F64:
+    """Smoothed position of each vertex at ``radius``, smoothed on a coarser graph of cells.
+
+    The vertices are gathered into cubes of side ``cell`` (each cube one node at the mean of its
+    vertices, two nodes linked where a mesh edge links their vertices), the nodes are smoothed
+    as ``valley_depths`` smooths vertices, and each vertex takes its node's smoothed position.
+    A round spreads a node over the mean squared length of the links, so the rounds are those
+    of ``smoothing_passes`` for links of the length that spreads as far as ``spread`` says a
+    median edge of the mesh does. The rounds fall with the square of the cell and so do the
+    nodes: a radius of many edge lengths costs a small share of smoothing the mesh itself.
+
+    Args:
+        vertices: Nx3 vertex positions [m].
+        i: One end of every mesh edge.
+        j: The other end.
+        radius: Smoothing scale [m].
+        cell: Side of the cubes [m].
+        spread: The mesh's mean squared edge length over its median edge length squared.
+
+    """
+    key3 = np.floor((vertices - vertices.min(axis=0)) / cell).astype(np.int64)
+    span = key3.max(axis=0) + 1
+    key = (key3[:, 0] * span[1] + key3[:, 1]) * span[2] + key3[:, 2]
+    _, node = np.unique(key, return_inverse=True)
+    node = node.ravel()
+    m = int(node.max()) + 1
+    count = np.bincount(node, minlength=m).astype(np.float64)
+    total = [np.bincount(node, weights=vertices[:, k], minlength=m) for k in range(3)]
+    pos: F64 = np.stack(total, axis=1).astype(np.float64) / count[:, None]
+    ni, nj = node[i], node[j]
+    cross = ni != nj
+    ni, nj = ni[cross], nj[cross]
+    if not len(ni):
+        return np.asarray(pos[node])
+    links = np.unique(np.minimum(ni, nj) * m + np.maximum(ni, nj))
+    lo, hi = links // m, links % m
+    length = math.sqrt(float(np.mean(np.sum((pos[lo] - pos[hi]) ** 2, axis=1))) / spread)
+    step = _neighbour_mean(lo, hi, m)
+    moved = pos
+    for _ in range(smoothing_passes(radius, length)):
+        moved = step @ moved
+    return np.asarray(vertices + (moved - pos)[node])
+
+
 def valley_depths(
     vertices: F64,
     faces: npt.NDArray[np.int64],
@@ -414,8 +489,11 @@ def valley_depths(
     Laplacian smoothing (see ``smoothing_passes``). The depth of a vertex is how far its smoothed
     position lies above it along its normal (positive in a valley, negative on a crest); a face's
     is the mean of its vertices'. Unlike Eq. 2, which compares neighbouring faces only, this sees
-    a crease that Poisson spread over several faces. The smoothing runs once, up to the largest
-    radius, and is read off at each smaller one on the way.
+    a crease that Poisson spread over several faces. Radii under ``COARSE_MIN_EDGES`` times
+    ``COARSE_CELLS`` edge lengths are smoothed on the mesh, once up to the largest of them and
+    read off at each smaller one on the way; larger ones on a coarser graph of cells
+    ``1 / COARSE_CELLS`` of the radius across (see ``_coarse_smooth``), which the smoothed
+    surface at that radius does not resolve.
 
     Args:
         vertices: Nx3 vertex positions [m].
@@ -437,22 +515,24 @@ def valley_depths(
     ).astype(np.float64)
     vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
     b = faces[:, [1, 2, 0]].ravel()
-    # An interior edge comes once from each of its faces: the matrix only marks neighbours.
-    link = sparse.csr_matrix(
-        (np.ones(2 * len(a)), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n, n)
-    )
-    # Each row divided by its count of neighbours, in place (a product with a diagonal matrix
-    # would build the matrix again).
-    degree = np.diff(link.indptr)
-    link.data[:] = np.repeat(1.0 / np.maximum(degree, 1), degree)
-    step = link
+    step: Any = None
     smooth, done = vertices, 0
+    # Each interior edge twice, a border edge once: the mean weighs them as the smoothing does.
+    length2 = np.sum((vertices[a] - vertices[b]) ** 2, axis=1)
+    spread = float(np.mean(length2)) / edge**2 if edge > 0 else 1.0
     out: dict[int, F64] = {}
     for k in sorted(range(len(radii)), key=lambda k: radii[k]):
-        for _ in range(smoothing_passes(radii[k], edge) - done):
-            smooth = step @ smooth
-            done += 1
-        deep = np.einsum('ij,ij->i', smooth - vertices, vn)
+        cell = radii[k] / COARSE_CELLS
+        if edge > 0 and cell >= COARSE_MIN_EDGES * edge:
+            at = _coarse_smooth(vertices, a, b, radii[k], cell, spread)
+        else:
+            if step is None:
+                step = _neighbour_mean(a, b, n)
+            for _ in range(smoothing_passes(radii[k], edge) - done):
+                smooth = step @ smooth
+                done += 1
+            at = smooth
+        deep = np.einsum('ij,ij->i', at - vertices, vn)
         out[k] = np.asarray(deep[faces].mean(axis=1))
     return [out[k] for k in range(len(radii))]
 

@@ -16,8 +16,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from ..errors import StockpileError
-from ..meshio import LabelledMesh, read_labelled_mesh
+from ...errors import StockpileError
+from ...meshio import LabelledMesh, read_labelled_mesh
 
 __all__ = [
     'EvaluationError',

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..geometry import umeyama
+from ...geometry import umeyama
 from .inputs import EvaluationError, Poses
 
 __all__ = [

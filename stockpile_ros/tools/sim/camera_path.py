@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import StockpileError
+from ...errors import StockpileError
 from .pile import rotation_z
 
 __all__ = [

@@ -6,8 +6,8 @@ Standard types: ``sensor_msgs/PointCloud2`` (x, y, z, rgb, label),
 (``stockpile_msgs``) are built from the ``report.json`` dictionaries of ``docs/formats.md``: JSON
 ``null`` becomes NaN in float fields.
 
-Each builder takes a :class:`~stockpile_ros.messages.MessageFactory` first, as in
-:mod:`stockpile_ros.messages`.
+Each builder takes a :class:`~stockpile_ros.ros.messages.MessageFactory` first, as in
+:mod:`stockpile_ros.ros.messages`.
 """
 
 from __future__ import annotations

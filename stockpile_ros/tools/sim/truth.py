@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..meshio import LabelledMesh, write_labelled_mesh
+from ...meshio import LabelledMesh, write_labelled_mesh
 from .pile import PlacedRock
 from .rocks import mesh_area, principal_dimensions, solid_moments, triangle_areas
 

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 from rosbags.typesys.store import Typestore
 
-from .camera import CameraModel
+from ..camera import CameraModel
 
 __all__ = [
     'MessageFactory',

@@ -18,8 +18,8 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.optimize import linear_sum_assignment
 
-from ..meshio import LabelledMesh
-from ..progress import progress
+from ...meshio import LabelledMesh
+from ...progress import progress
 
 __all__ = [
     'GROUND',

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from ..errors import StockpileError
+from ...errors import StockpileError
 from .rocks import SHAPES, RockMesh, random_rock
 
 __all__ = ['Gradation', 'PileConfig', 'PlacedRock', 'build_pile', 'parse_gradation', 'rotation_z']

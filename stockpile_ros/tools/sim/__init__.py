@@ -1,9 +1,10 @@
 """A stockpile simulator: rendered camera-cart bags of rock piles with exact ground truth.
 
-:func:`~stockpile_ros.sim.record.simulate` is the entry point (``stockpile simulate`` calls it); the
-modules are usable alone: :mod:`.rocks` (rock meshes), :mod:`.pile` (gradation and stacking),
-:mod:`.texture`, :mod:`.camera_path`, :mod:`.render` (CPU ray casting), :mod:`.truth`,
-:mod:`.record`.
+:func:`~stockpile_ros.tools.sim.record.simulate` is the entry point (``stockpile simulate`` calls
+it); the modules are usable alone: :mod:`.rocks` (rock meshes), :mod:`.pile` (gradation and
+stacking), :mod:`.texture`, :mod:`.camera_path`, :mod:`.render` (CPU ray casting), :mod:`.truth`,
+:mod:`.record`, and :mod:`.bed` (beds of hundreds of rocks, meshed without rendering: the
+segmentation's field-like yardstick).
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ def _candidate_dirs() -> list[Path]:
     for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
         dirs.append(Path(prefix) / 'share' / MSG_PACKAGE / 'msg')
     # The source tree (editable installs, tests).
-    dirs.append(Path(__file__).resolve().parent.parent / 'msg_schemas' / 'msg')
+    dirs.append(Path(__file__).resolve().parents[2] / 'msg_schemas' / 'msg')
     # Installed beside this package through setup.py's data_files (pip or colcon).
     dirs.append(Path(sys.prefix) / 'share' / 'stockpile_ros' / 'msg_schemas' / 'msg')
     return dirs

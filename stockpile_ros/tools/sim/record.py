@@ -22,12 +22,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from .. import messages as m
-from ..bagio.writer import BagWriter
-from ..camera import CameraModel
-from ..errors import StockpileError
-from ..progress import progress
-from ..segment.gradation import gradation
+from ...bagio.writer import BagWriter
+from ...camera import CameraModel
+from ...errors import StockpileError
+from ...progress import progress
+from ...ros import messages as m
+from ...segment.gradation import gradation
 from .camera_path import OPTICAL_IN_LINK, CartPath, PathConfig, auto_distance, quat_from_matrix
 from .render import Lighting, Renderer, linear_to_srgb
 from .scene import Scene, SceneConfig, build_scene

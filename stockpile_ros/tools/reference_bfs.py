@@ -12,8 +12,8 @@ from collections import deque
 import numpy as np
 import numpy.typing as npt
 
-from .adjacency import FaceAdjacency
-from .criterion import edge_score
+from ..segment.adjacency import FaceAdjacency
+from ..segment.criterion import edge_score
 
 __all__ = ['reference_bfs']
 

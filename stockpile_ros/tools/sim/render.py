@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from ..camera import CameraModel
+from ...camera import CameraModel
 from .pile import PlacedRock
 from .texture import BoardTexture, GroundTexture, RockTextures
 

@@ -1,13 +1,12 @@
 """From collector, run outcomes and results to the (topic, message) pairs the node set publishes.
 
-Written once over a :class:`~stockpile_ros.messages.MessageFactory`: the replay serialises the
+Written once over a :class:`~stockpile_ros.ros.messages.MessageFactory`: the replay serialises the
 messages with rosbags, the nodes publish them with rclpy. Topic names are the relative names of
-:mod:`stockpile_ros.topics` (the replay makes them absolute).
+:mod:`stockpile_ros.ros.topics` (the replay makes them absolute).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,11 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from ..artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
+from ..recon.collector import CollectorState
+from ..recon.scaling import odom_from_stockpile
+from ..runner import Outcome
+from ..segment.pipeline import Analysis
 from . import topics
 from .messages import MessageFactory, tf_message, transform_stamped
 from .outputs import (
@@ -28,10 +32,6 @@ from .outputs import (
     rock_array,
     rock_color,
 )
-from .recon.collector import CollectorState
-from .recon.pipeline import WorkFolder, odom_from_stockpile
-from .runner import Outcome
-from .segment.pipeline import Analysis
 
 __all__ = [
     'DIAGNOSTIC_PREFIX',
@@ -112,23 +112,23 @@ def capture_warnings(f: MessageFactory, stamp_ns: int, report: dict[str, Any]) -
     return [diagnostics(f, stamp_ns, 'capture', 'WARN', t) for t in report.get('warnings', [])]
 
 
-def _stage_values(stage: str, result: dict[str, Any]) -> tuple[str, str, dict[str, Any]]:
+def _stage_values(
+    result: SparseSummary | DenseSummary | MeshInfo,
+) -> tuple[str, str, dict[str, Any]]:
     """Level, message and key values of a finished stage."""
-    if stage == 'sfm':
-        values = {k: result.get(k) for k in
-                  ('keyframes', 'registered', 'registered_fraction', 'points',
-                   'mean_reprojection_error_px')}  # fmt: skip
-        return 'OK', f'{result.get("registered")} keyframes registered', values
-    if stage == 'dense':
-        return 'OK', f'{result.get("points")} dense points', {'points': result.get('points')}
-    scale = result.get('scale') or {}
-    method = str(scale.get('method', 'none'))
-    rel = scale.get('rel_uncertainty')
-    values = {
+    if isinstance(result, SparseSummary):
+        sparse = {'keyframes': result.total, 'registered': result.registered,
+                  'registered_fraction': result.registered_fraction, 'points': result.points,
+                  'mean_reprojection_error_px': result.mean_reprojection_error_px}  # fmt: skip
+        return 'OK', f'{result.registered} keyframes registered', sparse
+    if isinstance(result, DenseSummary):
+        return 'OK', f'{result.points} dense points', {'points': result.points}
+    method, rel = result.scale.method, result.scale.rel_uncertainty
+    values: dict[str, Any] = {
         'scale_method': method,
-        'metres_per_unit': scale.get('metres_per_unit'),
+        'metres_per_unit': result.scale.metres_per_unit,
         'scale_rel_uncertainty': rel,
-        'faces': (result.get('poisson') or {}).get('faces'),
+        'faces': result.poisson.get('faces'),
     }
     if method == 'none':
         return 'WARN', 'mesh ready, but without metric scale (no target, no odometry)', values
@@ -142,8 +142,8 @@ def reconstruction_diagnostics(
 ) -> list[Publication]:
     """One ``DiagnosticArray`` per finished stage, and one ERROR for the failed stage if any."""
     out = []
-    for stage, result in outcome.results.items():
-        level, message, values = _stage_values(stage, result)
+    for stage, result in outcome.finished():
+        level, message, values = _stage_values(result)
         values['seconds'] = round(outcome.seconds.get(stage, math.nan), 2)
         out.append(diagnostics(f, stamp_ns, stage, level, message, values))
     if not outcome.ok:
@@ -191,14 +191,12 @@ def reconstruction_outputs(
     """
     import open3d as o3d
 
-    from .meshio import read_labelled_mesh
+    from ..meshio import read_labelled_mesh
 
     work = Path(work_dir)
-    info = json.loads((work / 'mesh' / 'mesh.json').read_text())
-    sim = info['model_to_stockpile']
-    rot = np.asarray(sim['rotation'], dtype=np.float64).reshape(3, 3)
+    to_stockpile = load(MeshInfo, work / 'mesh' / 'mesh.json').model_to_stockpile.similarity()
     cloud = o3d.io.read_point_cloud(work / 'dense' / 'dense.ply')
-    points = float(sim['scale']) * np.asarray(cloud.points) @ rot.T + np.asarray(sim['translation'])
+    points = to_stockpile.apply(np.asarray(cloud.points))
     colors = None
     if cloud.has_colors():
         colors = np.clip(np.round(np.asarray(cloud.colors) * 255), 0, 255).astype(np.uint8)

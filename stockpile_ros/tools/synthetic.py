@@ -171,11 +171,24 @@ def make_pile(
 
 
 def poisson_mesh(
-    points: F64, normals: F64, depth: int = 8, trim_quantile: float = 0.02
+    points: F64,
+    normals: F64,
+    depth: int = 8,
+    trim_quantile: float = 0.02,
+    scale: float = 1.1,
+    threads: int = -1,
 ) -> tuple[F64, npt.NDArray[np.int64]]:
     """Open3d screened Poisson surface of oriented points, trimmed.
 
     Low-density vertices are removed, and so is the closure the solver adds below the ground.
+
+    Args:
+        points: Nx3 points.
+        normals: Nx3 unit normals.
+        depth: Octree depth: the solver's cube is cut ``2^depth`` times.
+        trim_quantile: Share of the lowest-density vertices removed.
+        scale: The solver's cube over the points' bounding cube (open3d's default 1.1).
+        threads: Solver threads (-1: all).
 
     Returns:
         Vertices and faces.
@@ -187,7 +200,9 @@ def poisson_mesh(
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     pcd.normals = o3d.utility.Vector3dVector(normals)
-    mesh, dens = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth)
+    mesh, dens = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
+        pcd, depth=depth, scale=scale, n_threads=threads
+    )
     dens = np.asarray(dens)
     v = np.asarray(mesh.vertices)
     drop = (dens < np.quantile(dens, trim_quantile)) | (v[:, 2] < -0.01)

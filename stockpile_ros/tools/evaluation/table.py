@@ -98,7 +98,7 @@ def _size_lines(sizes: dict[str, Any], rescaled: bool) -> list[str]:
 
 
 def format_table(evaluation: dict[str, Any]) -> str:
-    """Render the output of :func:`stockpile_ros.evaluation.evaluate` as readable text."""
+    """Render the output of :func:`stockpile_ros.tools.evaluation.evaluate` as readable text."""
     sc = evaluation['scale']
     gr = evaluation['gradation']
     judged = _pct(sc['error']) if sc['error'] is not None else f'not judged ({sc["note"]})'

@@ -1,0 +1,196 @@
+"""Metric scale from one printed marker: a photo set and a video of the same walk round a pile.
+
+Walk ``test`` is tests/test_photos.py's scene and walk (16 photos with a phone-like EXIF, names
+shuffled; the same walk filmed as 40 MJPG frames, self-calibrated, keyframes as the test picks
+them); ``wide`` and ``low`` are other scenes, walks and marker places, held out from the
+test's. Per walk and capture: keyframes, registered,
+the focal length's error, the scale error against the true camera centres, the stated
+uncertainty and its parts. Then, with the true poses and camera (so only the corners are judged),
+the marker scale from cv2.aruco's cornerSubPix corners (the baseline, measured in this run) and
+from the edge-fitted corners :func:`~stockpile_ros.recon.scale.detect_markers` gives.
+
+Usage:
+    .venv/bin/python bench/bench_marker_scale.py [--walks test wide low] [--work DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from PIL import Image
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'tests'))
+
+from recon_synth import look_at, marker_decal, render, scene_mesh
+from test_photos import CAM, MARKER, H, W
+
+from stockpile_ros.artefacts import WorkFolder
+from stockpile_ros.geometry import umeyama
+from stockpile_ros.recon.keyframes import KeyframeStore
+from stockpile_ros.recon.scale import (
+    MarkerDetections,
+    MarkerSpec,
+    detect_markers,
+    parse_targets,
+    scale_from_markers,
+)
+from stockpile_ros.recon.scaling import estimate_scale
+from stockpile_ros.recon.sfm import load_sparse
+from stockpile_ros.recon.stages import photo_names, run_keyframes, run_sfm_stage
+from stockpile_ros.settings import build_settings
+
+FRAMES = 40
+LOOK_AT = np.array([0.3, 0.0, 0.0])
+
+
+@dataclass(frozen=True)
+class Walk:
+    """An arc round the pile at a height that rises and falls, and where the marker lies."""
+
+    radius: float
+    arc: float
+    height: float
+    wobble: float
+    periods: float
+    marker: tuple[float, float]
+    seed: int
+
+    def centre(self, t: float) -> np.ndarray:
+        angle = self.arc * (t - 0.5)
+        height = self.height + self.wobble * math.sin(2 * math.pi * self.periods * t)
+        return np.array([self.radius * math.cos(angle), self.radius * math.sin(angle), height])
+
+    def view(self, mesh: object, t: float) -> np.ndarray:
+        rot, trans = look_at(self.centre(t), LOOK_AT)
+        decal = marker_decal('DICT_4X4_50', 7, 0.25, self.marker)
+        return render(mesh, CAM.k, (W, H), rot, trans, decals=(decal,))
+
+
+WALKS = {
+    'test': Walk(2.4, 1.4, 1.45, 0.25, 3, (1.15, 0.0), 0),
+    'wide': Walk(2.8, 1.6, 1.7, 0.3, 2, (0.9, 0.6), 1),
+    'low': Walk(2.1, 1.2, 1.25, 0.15, 4, (1.1, -0.4), 2),
+}
+
+
+def photos(walk: Walk, mesh: object, folder: Path) -> dict[str, float]:
+    """16 EXIF JPEGs along the walk; the walk parameter t of each file."""
+    folder.mkdir(parents=True)
+    order = np.random.default_rng(0).permutation(16)
+    where = {}
+    for i in range(16):
+        exif = Image.Exif()
+        exif[0x010F], exif[0x0110] = 'Synth', 'Phone'
+        sub = exif.get_ifd(0x8769)
+        sub[0x920A] = 4.2
+        sub[0xA405] = round(CAM.fx * math.hypot(36, 24) / math.hypot(W, H))
+        name = f'IMG_{order[i]:04d}.jpg'
+        Image.fromarray(walk.view(mesh, i / 15)).save(folder / name, quality=92, exif=exif)
+        where[name] = i / 15
+    return where
+
+
+def video(walk: Walk, mesh: object, path: Path) -> None:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*'MJPG'), 10.0, (W, H))
+    for i in range(FRAMES):
+        writer.write(cv2.cvtColor(walk.view(mesh, i / (FRAMES - 1)), cv2.COLOR_RGB2BGR))
+    writer.release()
+
+
+def subpix_markers(image: np.ndarray) -> MarkerDetections:
+    """The baseline: cv2.aruco's own corners refined by cornerSubPix."""
+    grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    code = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    corners, ids, _ = cv2.aruco.ArucoDetector(code, params).detectMarkers(grey)
+    if ids is None:
+        return {}
+    return {('DICT_4X4_50', int(i)): np.asarray(c, np.float64).reshape(4, 2)
+            for i, c in zip(np.ravel(ids), corners, strict=True)}  # fmt: skip
+
+
+def capture(
+    label: str,
+    walk: Walk,
+    source: Path,
+    work: WorkFolder,
+    values: dict[str, object],
+    where: dict[str, float],
+) -> list[str]:
+    """Print the capture's line; return its corner lines."""
+    options = build_settings(values).recon
+    counts = run_keyframes(source, work, options)
+    report = run_sfm_stage(work, options)
+    store = KeyframeStore(work.keyframes)
+    if where:
+        t = {k: where[v] for k, v in photo_names(work).items()}
+    else:
+        t = {r.file: r.index / (FRAMES - 1) for r in store.records}
+    model = load_sparse(work.sparse)
+    scale, _ = estimate_scale(work, model, options)
+    names = [k for k in t if k in model.views]
+    true = umeyama(np.array([model.views[k].center for k in names]),
+                   np.array([walk.centre(t[k]) for k in names])).scale  # fmt: skip
+    focal = next(iter(model.views.values())).camera.fx / CAM.fx - 1
+    parts = ', '.join(f'{k} {100 * v:.2f}' for k, v in scale.parts.items() if v is not None)
+    rel = scale.rel_uncertainty or float('nan')
+    print(f'{label:13s} {counts.frames:6d} {counts.keyframes:9d} '
+          f'{report.registered:10d} {100 * focal:+7.2f} '
+          f'{100 * (scale.metres_per_unit / true - 1):+8.3f} {100 * rel:7.3f}   {parts}',
+          flush=True)  # fmt: skip
+    return corners(label, walk, store, t)
+
+
+def corners(label: str, walk: Walk, store: KeyframeStore, t: dict[str, float]) -> list[str]:
+    """Marker scale with the true poses and camera: the corners alone, baseline and edges."""
+    specs = [s for s in parse_targets(MARKER) if isinstance(s, MarkerSpec)]
+    poses = {}
+    found: dict[str, dict[str, MarkerDetections]] = {'subpix': {}, 'edges': {}}
+    for record in store.records:
+        if record.file not in t:
+            continue
+        image = store.image(record)
+        poses[record.file] = (CAM, *look_at(walk.centre(t[record.file]), LOOK_AT))
+        found['subpix'][record.file] = subpix_markers(image)
+        found['edges'][record.file] = detect_markers(image, ['DICT_4X4_50'])
+    lines = []
+    for method, detections in found.items():
+        estimate = scale_from_markers(detections, poses, specs)
+        error = float('nan') if estimate is None else 100 * (estimate.metres_per_unit - 1)
+        lines.append(f'{label:13s} {method:7s} {error:+8.3f}')
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--walks', nargs='+', choices=list(WALKS), default=list(WALKS))
+    parser.add_argument('--work', type=Path, help='folder for the captures (default: a new one)')
+    args = parser.parse_args()
+    root = args.work or Path(tempfile.mkdtemp(prefix='bench_marker_scale_'))
+    print(f'work: {root}')
+    print('walk, source  frames keyframes registered focal %  scale %  stated %  parts %')
+    lines = []
+    for name in args.walks:
+        walk, folder = WALKS[name], root / name
+        mesh = scene_mesh(walk.seed)
+        where = photos(walk, mesh, folder / 'photos')
+        lines += capture(f'{name} photos', walk, folder / 'photos', WorkFolder(folder / 'pw'),
+                         {'recon.target': MARKER}, where)  # fmt: skip
+        video(walk, mesh, folder / 'walk.avi')
+        values = {'recon.target': MARKER, 'selector.min_parallax': 0.03, 'selector.min_spacing': 1}
+        lines += capture(f'{name} video', walk, folder / 'walk.avi', WorkFolder(folder / 'vw'),
+                         values, {})  # fmt: skip
+    print('\nwith the true poses and camera (scale error %, the corners alone):')
+    print('\n'.join(lines))
+
+
+if __name__ == '__main__':
+    main()

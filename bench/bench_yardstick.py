@@ -1,0 +1,107 @@
+"""A yardstick that looks like the field: beds of hundreds of rocks per material, meshed at 4-20
+edges across the smallest rock's b, segmented and measured with the default mode.
+
+Per material (``stockpile_ros.tools.sim.bed.MATERIALS``: aggregate 20-80 mm, cobble 0.1-0.3 m,
+riprap 0.3-1.5 m) one bed of ``--rocks`` rocks covering the ground (``build_bed``), surveyed from
+above and meshed by Poisson at each resolution (finest cell = the smallest b over ``--edges``;
+the median edge comes out within a few percent of the cell), the points with noise of ``--noise``
+cells along their normals (``bed_surface``). Then ``segment_mesh`` with the smallest rock of
+interest set to the material's smallest b (as a class check would set it), ``measure_rocks``, and
+the score against the true label of every face (``score_labels``: visible = at least 30 % of the
+rock's surface seen, one-to-one matches at surface IoU >= 0.5). One row per material and
+resolution; ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU
+time of ``segment_mesh`` and ``measure_rocks`` on one thread (which cores shared with other work
+do not inflate), and their growth with the face count (a least-squares power law over the
+resolutions) ends each material.
+
+Usage:
+    .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20]
+        [--materials aggregate cobble riprap] [--set FIELD=VALUE ...]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ[_var] = '1'
+
+import argparse  # noqa: E402
+import ast  # noqa: E402
+import pickle  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from stockpile_ros.segment.measure import measure_rocks  # noqa: E402
+from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh  # noqa: E402
+from stockpile_ros.tools.evaluation.labels import SizedRock, score_labels  # noqa: E402
+from stockpile_ros.tools.sim.bed import MATERIALS, BedConfig, bed_surface, build_bed  # noqa: E402
+from stockpile_ros.tools.sim.pile import Gradation  # noqa: E402
+
+
+def bed(material: str, rocks: int, seed: int, cache: Path):
+    lo, hi = MATERIALS[material]
+    path = cache / f'{material}-{rocks}-{seed}.pickle'
+    if path.exists():
+        return pickle.loads(path.read_bytes())
+    cfg = BedConfig(rocks=rocks, gradation=Gradation((lo, hi), (0.0, 100.0)))
+    placed = build_bed(np.random.default_rng(seed), cfg)
+    path.write_bytes(pickle.dumps(placed))
+    return placed
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rocks', type=int, default=300)
+    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--edges', type=float, nargs='+', default=[4.0, 8.0, 12.0, 20.0])
+    parser.add_argument('--materials', nargs='+', default=list(MATERIALS), choices=list(MATERIALS))
+    parser.add_argument('--noise', type=float, default=0.2, help='point noise [Poisson cells]')
+    parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
+    parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
+    args = parser.parse_args()
+    args.cache.mkdir(parents=True, exist_ok=True)
+    overrides = {k: ast.literal_eval(v) for k, v in (s.split('=', 1) for s in args.set)}
+    print(f'{args.rocks} rocks per bed, seed {args.seed}, noise {args.noise} cells; '
+          f'overrides: {overrides or "none"}')  # fmt: skip
+    print('material  b range m   edges/b  faces    visible reported found recall precision '
+          'merges splits  |b err| b bias  D50 err  seconds')  # fmt: skip
+    for material in args.materials:
+        placed = bed(material, args.rocks, args.seed, args.cache)
+        lo, hi = MATERIALS[material]
+        cost = []
+        for across in args.edges:
+            surface = bed_surface(placed, lo / across, np.random.default_rng(args.seed), args.noise)
+            params = SegmentParams.preset('default', **{'min_rock_b': lo, **overrides})
+            t0 = time.process_time()
+            seg = segment_mesh(surface.vertices, surface.faces, params)
+            rocks = measure_rocks(surface.vertices, seg)
+            seconds = time.process_time() - t0
+            truth = {
+                k: SizedRock(r['b'], r['mass'], r['visible_fraction'])
+                for k, r in surface.rocks.items()
+            }
+            s = score_labels(
+                surface.labels,
+                seg.labels,
+                seg.geometry.areas,
+                truth,
+                {r.id: SizedRock(r.b, r.mass) for r in rocks},
+            )
+            edges = lo / seg.scale.edge
+            print(f'{material:9s} {lo:4.2f}-{hi:4.2f}  {edges:7.1f} {len(surface.faces):8d} '
+                  f'{s.visible:7d} {s.reported:8d} {s.found:5d} {s.recall:6.3f} '
+                  f'{s.precision:9.3f} {s.merges:6d} {s.splits:6d}  {100 * s.b_error:6.1f}% '
+                  f'{100 * s.b_bias:+5.1f}% {100 * s.d50_error:+6.1f}%  {seconds:7.1f}',
+                  flush=True)  # fmt: skip
+            cost.append((len(surface.faces), seconds))
+        if len(cost) >= 2:
+            faces, secs = np.log(np.array(cost)).T
+            growth = np.polyfit(faces, secs, 1)[0]
+            print(f'{material}: segmentation and measurement cost grows as faces^{growth:.2f}')
+
+
+if __name__ == '__main__':
+    main()

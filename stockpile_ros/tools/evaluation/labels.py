@@ -1,0 +1,125 @@
+"""Score a segmentation against true labels on the same mesh (the yardstick of bench/).
+
+Where the true rock under every face is known (a simulated surface meshed directly, see
+:mod:`stockpile_ros.tools.sim.bed`), no transfer between surfaces is needed: each face's true
+label is given, and the matching is the one ``stockpile evaluate`` uses (``match_rocks``: one to
+one, surface IoU at least ``min_iou``), with each face a piece of its own. The figures are those of
+``evaluate``'s visible detection and sizes: true rocks under ``visible_threshold`` are neither
+missed when undetected nor counted against precision when found.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ...segment.gradation import gradation
+from .match import LabelTransfer, MatchOptions, match_rocks
+
+__all__ = ['LabelScore', 'SizedRock', 'score_labels']
+
+
+@dataclass(frozen=True)
+class SizedRock:
+    """A rock's size and mass, true or measured.
+
+    Attributes:
+        b: Intermediate dimension [m].
+        mass: Mass [kg].
+        visible_fraction: Share of the rock's surface seen (truth only; 1 for measured rocks).
+
+    """
+
+    b: float
+    mass: float
+    visible_fraction: float = 1.0
+
+
+@dataclass(frozen=True)
+class LabelScore:
+    """Detection and size figures of one segmentation.
+
+    Attributes:
+        visible: True rocks at least ``visible_threshold`` visible.
+        reported: Measured rocks.
+        found: Visible true rocks matched one to one.
+        recall: ``found / visible``.
+        precision: ``found`` over the reported rocks not matched to a less visible rock.
+        merges: Reported rocks holding most of two or more true rocks.
+        splits: True rocks cut into two or more reported rocks.
+        b_error: Median of ``|b / b_true - 1|`` over the found rocks.
+        b_bias: Median of ``b / b_true - 1`` over the found rocks.
+        d50_true: D50 by mass (of b) of the visible true rocks [m].
+        d50: D50 by mass of the reported rocks [m].
+        d50_error: ``d50 / d50_true - 1``.
+
+    """
+
+    visible: int
+    reported: int
+    found: int
+    recall: float
+    precision: float
+    merges: int
+    splits: int
+    b_error: float
+    b_bias: float
+    d50_true: float
+    d50: float
+    d50_error: float
+
+
+def _d50(rocks: list[SizedRock]) -> float:
+    d = gradation([r.b for r in rocks], [r.mass for r in rocks])['d50']
+    return float(d) if d is not None else float('nan')
+
+
+def score_labels(
+    true_labels: npt.ArrayLike,
+    labels: npt.ArrayLike,
+    areas: npt.ArrayLike,
+    truth: Mapping[int, SizedRock],
+    measured: Mapping[int, SizedRock],
+    options: MatchOptions | None = None,
+) -> LabelScore:
+    """Match the measured rocks to the true ones on shared faces and score them.
+
+    Args:
+        true_labels: Per face, the true rock id (0: ground).
+        labels: Per face, the segment id (0: none); only ids in ``measured`` are rocks.
+        areas: Per face, its area.
+        truth: Every true rock by id.
+        measured: The reported rocks by segment id.
+        options: Matching thresholds (``evaluate``'s defaults when None).
+
+    """
+    opt = options or MatchOptions()
+    t = np.asarray(true_labels, dtype=np.int64)
+    a = np.asarray(areas, dtype=np.float64)
+    transfer = LabelTransfer(np.arange(len(t)), t, np.zeros(len(t)), a)
+    result_ids, true_ids = sorted(measured), sorted(truth)
+    matching = match_rocks(labels, transfer, result_ids, true_ids, opt)
+    visible = {k for k, r in truth.items() if r.visible_fraction >= opt.visible_threshold}
+    found = [(r, k) for r, k, _ in matching.pairs if k in visible]
+    hidden = len(matching.pairs) - len(found)
+    rel = np.array([measured[r].b / truth[k].b - 1.0 for r, k in found])
+    d50_true = _d50([truth[k] for k in visible])
+    d50 = _d50(list(measured.values()))
+    counted = len(measured) - hidden
+    return LabelScore(
+        visible=len(visible),
+        reported=len(measured),
+        found=len(found),
+        recall=len(found) / len(visible) if visible else float('nan'),
+        precision=len(found) / counted if counted else float('nan'),
+        merges=len(matching.merges),
+        splits=len(matching.splits),
+        b_error=float(np.median(np.abs(rel))) if len(rel) else float('nan'),
+        b_bias=float(np.median(rel)) if len(rel) else float('nan'),
+        d50_true=d50_true,
+        d50=d50,
+        d50_error=d50 / d50_true - 1.0,
+    )

@@ -1,0 +1,107 @@
+"""The field-like yardstick: a bed of a hundred rocks covering the ground, segmented and scored."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from stockpile_ros.segment.measure import measure_rocks
+from stockpile_ros.segment.segmentation import SegmentParams, segment_mesh
+from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
+from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed
+from stockpile_ros.tools.sim.pile import Gradation, PlacedRock
+
+SMALLEST = 0.1
+
+
+@functools.lru_cache(maxsize=1)
+def _bed() -> list[PlacedRock]:
+    cfg = BedConfig(rocks=110, gradation=Gradation((SMALLEST, 0.3), (0.0, 100.0)), subdivisions=2)
+    return build_bed(np.random.default_rng(2), cfg)
+
+
+@functools.lru_cache(maxsize=2)
+def _surface(edges: float) -> BedSurface:
+    return bed_surface(_bed(), SMALLEST / edges, np.random.default_rng(2), noise_cells=0.2)
+
+
+def _truth(surface: BedSurface) -> dict[int, SizedRock]:
+    return {
+        k: SizedRock(r['b'], r['mass'], r['visible_fraction']) for k, r in surface.rocks.items()
+    }
+
+
+def test_the_bed_covers_the_ground_and_hides_some_rocks() -> None:
+    surface = _surface(8.0)
+    centres = surface.vertices[surface.faces].mean(axis=1)
+    rocks = np.concatenate([r.mesh.vertices for r in _bed()])
+    # Inside the square the rocks fell on (half the bed's width round its middle), no ground.
+    middle = 0.25 * (rocks[:, :2].max(axis=0) - rocks[:, :2].min(axis=0))
+    inner = np.all(np.abs(centres[:, :2] - rocks[:, :2].mean(axis=0)) < middle, axis=1)
+    areas = np.linalg.norm(
+        np.cross(
+            surface.vertices[surface.faces[:, 1]] - surface.vertices[surface.faces[:, 0]],
+            surface.vertices[surface.faces[:, 2]] - surface.vertices[surface.faces[:, 0]],
+        ),
+        axis=1,
+    )
+    assert areas[inner & (surface.labels == 0)].sum() < 0.05 * areas[inner].sum()
+    seen = np.array([r['visible_fraction'] for r in surface.rocks.values()])
+    assert np.all((seen >= 0) & (seen <= 1))
+    # Stacked more than one layer deep: many rocks are mostly hidden, many mostly seen.
+    assert 0.2 < np.mean(seen < 0.3) < 0.6
+    assert np.mean(seen >= 0.3) > 0.4
+    assert {r.shape for r in _bed()} == {'equant', 'flat', 'elongated'}
+
+
+def test_what_was_seen_does_not_depend_on_the_mesh() -> None:
+    # The truth is surveyed at a spacing of the smallest rock, whatever the Poisson cell.
+    fine, coarse = _surface(8.0), bed_surface(_bed(), SMALLEST / 4, np.random.default_rng(2))
+    assert len(coarse.faces) < 0.5 * len(fine.faces)
+    for k, rock in fine.rocks.items():
+        assert coarse.rocks[k]['visible_fraction'] == rock['visible_fraction']
+
+
+def test_perfect_labels_score_perfectly_and_a_merge_does_not() -> None:
+    truth = {1: SizedRock(1.0, 1.0, 0.8), 2: SizedRock(2.0, 8.0, 0.8), 3: SizedRock(1.0, 1.0, 0.1)}
+    true_labels = np.array([1, 1, 2, 2, 2, 3, 0])
+    areas = np.ones(7)
+    same = score_labels(true_labels, true_labels, areas, truth, truth)
+    assert (same.visible, same.found, same.recall, same.precision) == (2, 2, 1.0, 1.0)
+    assert same.b_error == 0.0
+    # Rock 3 is barely visible: its match counts neither way.
+    assert same.reported == 3
+    merged = np.array([1, 1, 1, 1, 1, 3, 0])
+    score = score_labels(true_labels, merged, areas, truth, {1: SizedRock(2.0, 9.0), 3: truth[3]})
+    assert (score.found, score.merges) == (1, 1)
+    assert score.recall == 0.5
+    assert score.precision == 1.0
+    assert score.b_error == 0.0
+
+
+def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
+    # 8 edges across the smallest b, under the default floor of 20 edges: with it, the rocks
+    # under 20 edges are fragments and 6 of 61 visible rocks are found. With the floor at 4 edges,
+    # measured when written: 32 of 61 found, precision 0.52, median b error 9.4 %, D50 +26 %
+    # (the failures are touching rocks taken as one). The bounds catch a step back, not the goal
+    # (bench/bench_yardstick.py).
+    surface = _surface(8.0)
+    truth = _truth(surface)
+
+    def score(params: SegmentParams) -> LabelScore:
+        seg = segment_mesh(surface.vertices, surface.faces, params)
+        assert SMALLEST / seg.scale.edge == pytest.approx(8.0, rel=0.15)
+        rocks = measure_rocks(surface.vertices, seg)
+        measured = {r.id: SizedRock(r.b, r.mass) for r in rocks}
+        return score_labels(surface.labels, seg.labels, seg.geometry.areas, truth, measured)
+
+    floored = score(SegmentParams(min_rock_b=SMALLEST))
+    assert floored.recall < 0.3
+    resolved = score(SegmentParams(min_rock_b=SMALLEST, min_rock_edges=4.0))
+    assert resolved.visible >= 45
+    assert resolved.recall >= 0.45
+    assert resolved.precision >= 0.45
+    assert resolved.b_error <= 0.12
+    assert abs(resolved.d50_error) <= 0.35
