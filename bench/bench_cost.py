@@ -31,10 +31,10 @@ from stockpile_ros.bagdrive import keyframes_from_bag
 from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.runner import run_segmentation
 from stockpile_ros.settings import build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig
-from stockpile_ros.sim.record import SimulationConfig, simulate
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 STAGES = ('keyframes', 'sfm', 'dense', 'mesh', 'segment')
 TARGET = 'charuco:5x4:0.08:0.06:DICT_4X4_50'
@@ -47,21 +47,20 @@ def _stage(stage: str, bag: Path, values: dict[str, Any], queue: Any) -> None:
     start = time.perf_counter()
     try:
         if stage == 'keyframes':
-            result = keyframes_from_bag(bag, settings)
-            summary = f'{result["keyframes"]} keyframes'
+            summary = f'{keyframes_from_bag(bag, settings).keyframes} keyframes'
         elif stage == 'segment':
             outcome = run_segmentation(settings, work / 'mesh')
-            if not outcome.ok:
+            if not outcome.ok or outcome.analysis is None:
                 raise RuntimeError(outcome.reason)
-            summary = f'{len(outcome.results["segment"]["rocks"])} rocks'
+            summary = f'{len(outcome.analysis.report["rocks"])} rocks'
         else:
-            result = reconstruct(None, work, settings.recon, stage)[stage]
+            result: Any = reconstruct(None, work, settings.recon, stage)[stage]
             if stage == 'sfm':
-                summary = f'{result["registered"]}/{result["total"]} registered'
+                summary = f'{result.registered}/{result.total} registered'
             elif stage == 'dense':
-                summary = f'{result["points"]} points'
+                summary = f'{result.points} points'
             else:
-                summary = f'{result["poisson"]["faces"]} faces'
+                summary = f'{result.poisson["faces"]} faces'
     except Exception as exc:  # handed to the parent, which reports it
         queue.put(f'FAILED: {exc}')
         return

@@ -50,10 +50,10 @@ from stockpile_ros.recon.pipeline import reconstruct
 from stockpile_ros.recon.sfm import SparseModel, View, load_sparse
 from stockpile_ros.recon.surface import PoissonOptions, poisson_surface
 from stockpile_ros.settings import Settings, build_settings
-from stockpile_ros.sim.camera_path import PathConfig
-from stockpile_ros.sim.pile import PileConfig, parse_gradation
-from stockpile_ros.sim.record import SimulationConfig, simulate, truth_folder
-from stockpile_ros.sim.scene import SceneConfig
+from stockpile_ros.tools.sim.camera_path import PathConfig
+from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
+from stockpile_ros.tools.sim.record import SimulationConfig, simulate, truth_folder
+from stockpile_ros.tools.sim.scene import SceneConfig
 
 sys.path.insert(0, str(Path(__file__).parent))
 from eval_recon import align_keyframes, evaluate, rock_surface_distance

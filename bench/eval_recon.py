@@ -23,9 +23,9 @@ import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
-from stockpile_ros.evaluation.match import transfer_labels
 from stockpile_ros.geometry import Similarity
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh
+from stockpile_ros.tools.evaluation.match import transfer_labels
 
 F64 = npt.NDArray[np.float64]
 
