@@ -6,7 +6,9 @@ Figures: registered keyframes, camera centre error after a similarity alignment 
 cameras (paired by stamp; rotation from the camera orientations, so that a straight path is
 aligned too; scale and shift from the centres; relative to the pile extent), scale error of the
 claimed metric frame (the alignment's scale should be 1) and of the target and odometry estimates
-alone, and the distance from the mesh to the true surface (median, relative to the median rock b).
+alone, and the distance from the mesh to the true surface (median, relative to the median rock b):
+over the mesh within the pile's footprint, and over the mesh whose nearest true surface is a rock
+(``rock_*``: area-weighted, the surface every rock size is measured on).
 """
 
 from __future__ import annotations
@@ -17,21 +19,64 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from stockpile_ros.geometry import Similarity
-from stockpile_ros.meshio import read_labelled_mesh
+from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh
+from stockpile_ros.tools.evaluation.match import transfer_labels
+
+F64 = npt.NDArray[np.float64]
 
 
-def evaluate(work: Path, truth_dir: Path) -> dict[str, Any]:
-    truth = json.loads((truth_dir / 'truth.json').read_text())
-    info = json.loads((work / 'mesh' / 'mesh.json').read_text())
-    sparse = json.loads((work / 'sparse' / 'sparse.json').read_text())
+def weighted_quantile(values: F64, weights: F64, q: float) -> float:
+    """The value below which the share ``q`` of the total weight lies."""
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, q * cumulative[-1])])
+
+
+def rock_surface_distance(
+    vertices: F64, faces: npt.NDArray[np.int64], scene: LabelledMesh, b: float
+) -> dict[str, float]:
+    """Area-weighted distance to the true surface of the mesh parts whose nearest surface is a rock.
+
+    Faces are cut into pieces no longer than a twentieth of ``b`` first, so that a large face
+    does not take one distance for all of its area.
+
+    Returns:
+        Median and 90th percentile distance [m] and relative to ``b``, and the share of the
+        mesh's area that lies on rocks.
+
+    """
+    transfer = transfer_labels(vertices, faces, scene, np.inf, max_edge=b / 20)
+    rock = transfer.true_labels > 0
+    dist, area = transfer.distances[rock], transfer.areas[rock]
+    median = weighted_quantile(dist, area, 0.5)
+    p90 = weighted_quantile(dist, area, 0.9)
+    return {
+        'rock_median_distance_m': median,
+        'rock_p90_distance_m': p90,
+        'rock_median_rel_b': median / b,
+        'rock_p90_rel_b': p90 / b,
+        'rock_area_share': float(area.sum() / transfer.areas.sum()),
+    }
+
+
+def align_keyframes(
+    keyframes: list[dict[str, Any]], truth: dict[str, Any]
+) -> tuple[Similarity, F64]:
+    """Similarity from the keyframes' frame to the truth's, and each keyframe's centre error [m].
+
+    Keyframes are paired with the true cameras by stamp. Centres alone leave the roll about a
+    straight path free: the rotation is the chordal mean of the camera orientations'
+    differences, then scale and shift come from the centres.
+    """
     true_cams = {int(c['stamp_ns']): c for c in truth['cameras']}
     stamps = np.array(sorted(true_cams))
     ours, theirs, rotations = [], [], np.zeros((3, 3))
-    for kf in info['keyframes']:
+    for kf in keyframes:
         k = int(np.argmin(np.abs(stamps - kf['stamp_ns'])))
         if abs(int(stamps[k]) - kf['stamp_ns']) < 5_000_000:
             cam = true_cams[int(stamps[k])]
@@ -42,14 +87,20 @@ def evaluate(work: Path, truth_dir: Path) -> dict[str, Any]:
                 @ Rotation.from_quat(kf['orientation_xyzw']).as_matrix().T
             )
     src, dst = np.asarray(ours), np.asarray(theirs)
-    # Centres alone leave the roll about a straight path free: the rotation is the chordal mean of
-    # the camera orientations' differences, then scale and shift come from the centres.
     u, _, vt = np.linalg.svd(rotations)
     rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
     xs, xd = src - src.mean(axis=0), dst - dst.mean(axis=0)
     scale = float(np.sum(xd * (xs @ rot.T)) / np.sum(xs**2))
     sim = Similarity(scale, rot, dst.mean(axis=0) - scale * rot @ src.mean(axis=0))
     cam_err = np.linalg.norm(sim.apply(src) - dst, axis=1)
+    return sim, cam_err
+
+
+def evaluate(work: Path, truth_dir: Path) -> dict[str, Any]:
+    truth = json.loads((truth_dir / 'truth.json').read_text())
+    info = json.loads((work / 'mesh' / 'mesh.json').read_text())
+    sparse = json.loads((work / 'sparse' / 'sparse.json').read_text())
+    sim, cam_err = align_keyframes(info['keyframes'], truth)
 
     scene = read_labelled_mesh(truth_dir / 'scene.ply')
     rock_faces = scene.faces[scene.labels > 0]
@@ -88,6 +139,7 @@ def evaluate(work: Path, truth_dir: Path) -> dict[str, Any]:
         if in_pile.any()
         else None,
         'mesh_faces': len(mesh.faces),
+        **rock_surface_distance(verts, mesh.faces, scene, b_median),
     }
     if metric:
         combined = info['scale']['metres_per_unit']
