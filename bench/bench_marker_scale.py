@@ -24,12 +24,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'tests'))
 
 from recon_synth import look_at, marker_decal, render, scene_mesh
-from test_photos import CAM, MARKER, H, W
+from test_photos import CAM, MARKER, H, W, write_photos
 
 from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.geometry import umeyama
@@ -83,18 +82,7 @@ WALKS = {
 def photos(walk: Walk, mesh: object, folder: Path) -> dict[str, float]:
     """16 EXIF JPEGs along the walk; the walk parameter t of each file."""
     folder.mkdir(parents=True)
-    order = np.random.default_rng(0).permutation(16)
-    where = {}
-    for i in range(16):
-        exif = Image.Exif()
-        exif[0x010F], exif[0x0110] = 'Synth', 'Phone'
-        sub = exif.get_ifd(0x8769)
-        sub[0x920A] = 4.2
-        sub[0xA405] = round(CAM.fx * math.hypot(36, 24) / math.hypot(W, H))
-        name = f'IMG_{order[i]:04d}.jpg'
-        Image.fromarray(walk.view(mesh, i / 15)).save(folder / name, quality=92, exif=exif)
-        where[name] = i / 15
-    return where
+    return write_photos(folder, lambda t: walk.view(mesh, t))
 
 
 def video(walk: Walk, mesh: object, path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -46,12 +47,11 @@ def _view(t: float) -> np.ndarray:
 _view.mesh = scene_mesh()  # type: ignore[attr-defined]
 
 
-@pytest.fixture(scope='module')
-def photos(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np.ndarray]]:
-    """16 JPEGs with a phone-like EXIF (35 mm equivalent rounded to a whole mm), names shuffled."""
-    folder = tmp_path_factory.mktemp('photos')
+def write_photos(folder: Path, view: Callable[[float], np.ndarray]) -> dict[str, float]:
+    """16 JPEGs of ``view(t)`` along a walk (t from 0 to 1) with a phone-like EXIF (35 mm
+    equivalent rounded to a whole mm), names shuffled; returns each file's t."""
     order = np.random.default_rng(0).permutation(16)
-    truth = {}
+    where = {}
     for i in range(16):
         exif = Image.Exif()
         exif[0x010F], exif[0x0110] = 'Synth', 'Phone'
@@ -59,9 +59,17 @@ def photos(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np
         sub[0x920A] = 4.2
         sub[0xA405] = round(CAM.fx * math.hypot(36, 24) / math.hypot(W, H))
         name = f'IMG_{order[i]:04d}.jpg'
-        Image.fromarray(_view(i / 15)).save(folder / name, quality=92, exif=exif)
-        truth[name] = _centre(i / 15)
-    return folder, truth
+        Image.fromarray(view(i / 15)).save(folder / name, quality=92, exif=exif)
+        where[name] = i / 15
+    return where
+
+
+@pytest.fixture(scope='module')
+def photos(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np.ndarray]]:
+    """The walk's 16 photos and the true camera centre of each."""
+    folder = tmp_path_factory.mktemp('photos')
+    where = write_photos(folder, _view)
+    return folder, {name: _centre(t) for name, t in where.items()}
 
 
 def _scale_error(
