@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-__all__ = ['BagError', 'CaptureError', 'MeshError', 'StockpileError']
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ['BagError', 'CaptureError', 'MeshError', 'StockpileError', 'reading']
 
 
 class StockpileError(Exception):
@@ -55,3 +59,22 @@ class MeshError(StockpileError, ValueError):
 
     A ``ValueError`` too, so that callers written against the older reader keep catching it.
     """
+
+
+@contextmanager
+def reading(path: Path, kind: str) -> Iterator[None]:
+    """Turn the operating system's errors while reading ``path`` into a :class:`MeshError`.
+
+    Args:
+        path: The file being read.
+        kind: What it should be, in words (``mesh file``, ``point cloud file``).
+
+    """
+    try:
+        yield
+    except FileNotFoundError:
+        raise MeshError(f'{path}: no such {kind}') from None
+    except IsADirectoryError:
+        raise MeshError(f'{path}: a folder, not a {kind}') from None
+    except OSError as exc:
+        raise MeshError(f'{path}: cannot read ({exc.strerror or exc})') from None

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .errors import MeshError
+from .errors import MeshError, reading
 from .meshio import LabelledMesh, check_arrays, check_ply_size, read_labelled_mesh, read_ply_header
 
 __all__ = [
@@ -256,25 +256,14 @@ def read_mesh(path: str | Path, units: str = 'm') -> tuple[LabelledMesh, MeshChe
 
     """
     path = Path(path)
-    try:
-        with path.open('rb') as stream:
-            head = stream.read(3)
-            if head == b'ply':
-                raw = head + stream.read()
-                header = read_ply_header(raw, path)
-                check_ply_size(header, len(raw), path)
-                del raw
-                mesh = (
-                    _read_with_open3d(path)
-                    if header.format == 'ascii'
-                    else read_labelled_mesh(path)
-                )
-            else:
-                mesh = _read_with_open3d(path)
-    except FileNotFoundError:
-        raise MeshError(f'{path}: no such mesh file') from None
-    except IsADirectoryError:
-        raise MeshError(f'{path}: a folder, not a mesh file') from None
-    except OSError as exc:
-        raise MeshError(f'{path}: cannot read ({exc.strerror or exc})') from None
+    with reading(path, 'mesh file'), path.open('rb') as stream:
+        head = stream.read(3)
+        if head == b'ply':
+            raw = head + stream.read()
+            header = read_ply_header(raw, path)
+            check_ply_size(header, len(raw), path)
+            del raw
+            mesh = _read_with_open3d(path) if header.format == 'ascii' else read_labelled_mesh(path)
+        else:
+            mesh = _read_with_open3d(path)
     return check_mesh(mesh, path, units)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import MeshError
+from ..errors import MeshError, reading
 from ..meshio import check_ply_size, read_ply_header
 
 __all__ = ['CLOUD_SUFFIXES', 'Cloud', 'is_mesh_file', 'read_cloud']
@@ -107,7 +107,7 @@ def is_mesh_file(path: str | Path) -> bool:
     """
     file = Path(path)
     suffix = file.suffix.lower()
-    try:
+    with reading(file, 'mesh file (nor point cloud)'):
         if suffix == '.ply':
             with file.open('rb') as stream:
                 raw = stream.read(1 << 16)
@@ -120,12 +120,6 @@ def is_mesh_file(path: str | Path) -> bool:
         if suffix == '.obj':
             with file.open('rb') as stream:
                 return any(line.startswith(b'f ') for line in stream)
-    except FileNotFoundError:
-        raise MeshError(f'{file}: no such mesh file (nor point cloud)') from None
-    except IsADirectoryError:
-        raise MeshError(f'{file}: a folder, not a mesh file') from None
-    except OSError as exc:
-        raise MeshError(f'{file}: cannot read ({exc.strerror or exc})') from None
     return suffix not in CLOUD_SUFFIXES
 
 
@@ -283,11 +277,5 @@ def read_cloud(path: str | Path) -> Cloud:
             f'{file}: unknown point cloud suffix {file.suffix!r} (known: '
             f'{", ".join(CLOUD_SUFFIXES)})'
         )
-    try:
+    with reading(file, 'file (a point cloud)'):
         return _finish(reader(file))
-    except FileNotFoundError:
-        raise MeshError(f'{file}: no such file') from None
-    except IsADirectoryError:
-        raise MeshError(f'{file}: a folder, not a point cloud file') from None
-    except OSError as exc:
-        raise MeshError(f'{file}: cannot read ({exc.strerror or exc})') from None
