@@ -108,6 +108,7 @@ class Inbox:
         self._logger = logger
         self.dropped = 0
         self._items: deque[tuple[Callable[[], None], bool]] = deque()
+        self._droppable = 0
         self._cond = threading.Condition()
         self._busy = False
         self._open = True
@@ -118,9 +119,11 @@ class Inbox:
         """Queue ``work``; a droppable item beyond ``max_droppable`` drops the oldest one."""
         with self._cond:
             self._items.append((work, droppable))
-            if droppable and sum(d for _, d in self._items) > self.max_droppable:
+            self._droppable += droppable
+            if self._droppable > self.max_droppable:
                 oldest = next(i for i, (_, d) in enumerate(self._items) if d)
                 del self._items[oldest]
+                self._droppable -= 1
                 self.dropped += 1
             self._cond.notify_all()
 
@@ -142,7 +145,8 @@ class Inbox:
                 self._cond.wait_for(lambda: self._items or not self._open)
                 if not self._items:
                     return
-                work, _ = self._items.popleft()
+                work, droppable = self._items.popleft()
+                self._droppable -= droppable
                 self._busy = True
             try:
                 work()

@@ -246,11 +246,7 @@ def run_mesh_stage(work: WorkFolder, options: ReconOptions) -> MeshInfo:
         scale_details=to_json({**scale_details, 'note': scale.note}),
         ground_plane_model=[float(v) for v in ground.plane],
         ground_inliers=len(ground.inliers),
-        model_to_stockpile=SimilarityRecord(
-            float(sim.scale),
-            [float(v) for v in sim.rotation.ravel()],
-            [float(v) for v in sim.translation],
-        ),
+        model_to_stockpile=SimilarityRecord.of(sim),
         keyframes=_keyframe_poses(model, work, sim.scale, sim.rotation, sim.translation),
         keyframes_off_path=dropped,
         poisson=to_json(poisson),

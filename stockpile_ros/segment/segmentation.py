@@ -55,8 +55,6 @@ from .params import RockScale, SegmentParams, median_edge, rock_scale
 from .region import grow_regions
 from .valleys import smooth_normals, split_at_valleys, valley_depths
 
-F64 = npt.NDArray[np.float64]
-
 __all__ = ['Segmentation', 'segment_mesh']
 
 I32 = npt.NDArray[np.int32]
