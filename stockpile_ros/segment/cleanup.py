@@ -200,39 +200,52 @@ def merge_convex_borders(
 
     def hull_of(region: int) -> F64:
         if region not in hulls:
-            # The region's vertices in index order, as np.unique gives them, without a sort.
+            # The region's vertices in index order: a large region's through a mask of every
+            # vertex (no sort), a small one's sorted (a pass over every vertex would cost more).
             tri = faces[order[bounds[region] : bounds[region + 1]]]
-            used[tri] = True
-            ids = np.flatnonzero(used)
-            used[ids] = False
+            if tri.size * 8 < len(used):
+                ids = np.unique(tri)
+            else:
+                used[tri] = True
+                ids = np.flatnonzero(used)
+                used[ids] = False
             hulls[region] = _hull_points(vertices[ids])
         return hulls[region]
 
+    # The faces either side of every border between two regions, found once: a join only turns
+    # borders into insides, so later rounds look at these edges alone.
+    a, b = labels[adj.i], labels[adj.j]
+    edges = np.flatnonzero((a != b) & (a > 0) & (b > 0))
+    fi, fj = adj.i[edges], adj.j[edges]
+    mid = 0.5 * (geom.centroids[fi] + geom.centroids[fj])
+    out = geom.normals[fi] + geom.normals[fj]
+    out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+    area = np.bincount(labels, weights=geom.areas)
+    width = int(labels.max()) + 1
     while True:
-        a, b = labels[adj.i], labels[adj.j]
-        cross = (a != b) & (a > 0) & (b > 0)
-        lo, hi = np.minimum(a, b)[cross], np.maximum(a, b)[cross]
-        mid = 0.5 * (geom.centroids[adj.i[cross]] + geom.centroids[adj.j[cross]])
-        out = geom.normals[adj.i[cross]] + geom.normals[adj.j[cross]]
-        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
-        area = np.bincount(labels, weights=geom.areas)
-        pairs, inverse, count = np.unique(
-            np.stack([lo, hi], axis=1), axis=0, return_inverse=True, return_counts=True
-        )
-        inverse = inverse.ravel()
+        a, b = labels[fi], labels[fj]
+        inside = a == b
+        if inside.any():
+            a, b, fi, fj, mid, out = (x[~inside] for x in (a, b, fi, fj, mid, out))
+        # One key per pair of regions, in the order of (smaller id, larger id); a stable sort
+        # keeps each border's edges in mesh order.
+        key = np.minimum(a, b).astype(np.int64) * width + np.maximum(a, b)
+        order_k = np.argsort(key, kind='stable')
+        pairs, first, count = np.unique(key[order_k], return_index=True, return_counts=True)
         best, best_depth = -1, max_depth
         for k in np.flatnonzero(count >= min_edges):
-            key = (int(pairs[k, 0]), int(pairs[k, 1]))
-            if key not in cache:
-                size = float(np.sqrt(min(area[key[0]], area[key[1]])))
-                union = np.concatenate([hull_of(key[0]), hull_of(key[1])])
-                sel = inverse == k
-                cache[key] = _border_depth(union, mid[sel], out[sel], size)
-            if cache[key] < best_depth:
-                best, best_depth = int(k), cache[key]
+            pair = (int(pairs[k] // width), int(pairs[k] % width))
+            if pair not in cache:
+                size = float(np.sqrt(min(area[pair[0]], area[pair[1]])))
+                union = np.concatenate([hull_of(pair[0]), hull_of(pair[1])])
+                sel = order_k[first[k] : first[k] + count[k]]
+                cache[pair] = _border_depth(union, mid[sel], out[sel], size)
+            if cache[pair] < best_depth:
+                best, best_depth = int(k), cache[pair]
         if best < 0:
             return labels
-        keep, gone = int(pairs[best, 0]), int(pairs[best, 1])
+        keep, gone = int(pairs[best] // width), int(pairs[best] % width)
         hulls[keep] = _hull_points(np.concatenate([hull_of(keep), hull_of(gone)]))
         labels[labels == gone] = keep
+        area[keep] += area[gone]
         cache = {k: d for k, d in cache.items() if keep not in k and gone not in k}

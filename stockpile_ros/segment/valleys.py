@@ -84,10 +84,10 @@ def _neighbour_mean(i: npt.NDArray[np.int64], j: npt.NDArray[np.int64], n: int) 
         n: Number of vertices.
 
     """
-    # Duplicates are summed: the matrix only marks neighbours.
-    link = sparse.csr_matrix(
-        (np.ones(2 * len(i)), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)
-    )
+    # Duplicates are summed: the matrix only marks neighbours. Built one way and added to its
+    # transpose: a mesh's half-edges then go in once each instead of twice, at a third of the cost.
+    link = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    link = (link + link.T).tocsr()
     # Each row divided by its count of neighbours, in place (a product with a diagonal matrix
     # would build the matrix again).
     degree = np.diff(link.indptr)
@@ -136,10 +136,11 @@ def _coarse_smooth(
     ni, nj = ni[cross], nj[cross]
     if not len(ni):
         return np.asarray(pos[node])
-    links = np.unique(np.minimum(ni, nj) * m + np.maximum(ni, nj))
-    lo, hi = links // m, links % m
-    length = math.sqrt(float(np.mean(np.sum((pos[lo] - pos[hi]) ** 2, axis=1))) / spread)
-    step = _neighbour_mean(lo, hi, m)
+    step = _neighbour_mean(ni, nj, m)
+    # Every link once each way in the matrix, however many mesh edges made it.
+    rows = np.repeat(np.arange(m), np.diff(step.indptr))
+    link2 = np.sum((pos[rows] - pos[step.indices]) ** 2, axis=1)
+    length = math.sqrt(float(np.mean(link2)) / spread)
     moved = pos
     for _ in range(smoothing_passes(radius, length)):
         moved = step @ moved
@@ -188,8 +189,12 @@ def valley_depths(
     step: Any = None
     smooth, done = vertices, 0
     # Each interior edge twice, a border edge once: the mean weighs them as the smoothing does.
-    length2 = np.sum((vertices[a] - vertices[b]) ** 2, axis=1)
-    spread = float(np.mean(length2)) / edge**2 if edge > 0 else 1.0
+    # Summed a coordinate at a time: gathering whole rows of ``vertices`` costs four times more.
+    length2 = 0.0
+    for column in np.ascontiguousarray(vertices.T):
+        side = column[a] - column[b]
+        length2 += float(side @ side)
+    spread = length2 / len(a) / edge**2 if edge > 0 and len(a) else 1.0
     out: dict[int, F64] = {}
     for k in sorted(range(len(radii)), key=lambda k: radii[k]):
         cell = radii[k] / COARSE_CELLS
@@ -203,7 +208,7 @@ def valley_depths(
                 done += 1
             at = smooth
         deep = np.einsum('ij,ij->i', at - vertices, vn)
-        out[k] = np.asarray(deep[faces].mean(axis=1))
+        out[k] = (deep[faces[:, 0]] + deep[faces[:, 1]] + deep[faces[:, 2]]) / 3.0
     return [out[k] for k in range(len(radii))]
 
 
