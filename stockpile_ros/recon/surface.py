@@ -81,12 +81,13 @@ def poisson_surface(
         verts = o3d.geometry.PointCloud(mesh.vertices)
         far = np.asarray(verts.compute_point_cloud_distance(cloud))
         drop |= far > options.max_distance * spacing
-    mesh.remove_vertices_by_mask(drop)
-
+    # The crop to the points' box goes into the same mask: open3d's crop of a mesh takes as long
+    # as the rest of the trimming together.
     lo, hi = points.min(axis=0), points.max(axis=0)
     pad = options.margin * float(np.linalg.norm(hi - lo))
-    box = o3d.geometry.AxisAlignedBoundingBox(lo - pad, hi + pad)
-    mesh = mesh.crop(box)
+    verts = np.asarray(mesh.vertices)
+    drop |= np.any((verts < lo - pad) | (verts > hi + pad), axis=1)
+    mesh.remove_vertices_by_mask(drop)
     mesh.remove_unreferenced_vertices()
     mesh.remove_degenerate_triangles()
     if 0 < options.target_faces < len(mesh.triangles):

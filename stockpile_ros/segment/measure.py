@@ -304,9 +304,12 @@ def _trimmed_extents(proj: F64, weights: F64, share: float) -> tuple[float, floa
 def _rim_vertices(tri: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
     a = tri[:, [0, 1, 2]].ravel()
     b = tri[:, [1, 2, 0]].ravel()
-    edges = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
-    uniq, count = np.unique(edges, axis=0, return_counts=True)
-    return np.unique(uniq[count == 1])
+    # One integer per undirected edge: np.unique over rows is several times slower.
+    width = int(tri.max()) + 1
+    key = np.minimum(a, b) * width + np.maximum(a, b)
+    uniq, count = np.unique(key, return_counts=True)
+    once = uniq[count == 1]
+    return np.unique(np.concatenate([once // width, once % width]))
 
 
 def visibility_warnings(rocks: list[RockMeasure]) -> list[str]:
