@@ -85,8 +85,8 @@ def poisson_surface(
     # as the rest of the trimming together.
     lo, hi = points.min(axis=0), points.max(axis=0)
     pad = options.margin * float(np.linalg.norm(hi - lo))
-    verts = np.asarray(mesh.vertices)
-    drop |= np.any((verts < lo - pad) | (verts > hi + pad), axis=1)
+    position = np.asarray(mesh.vertices)
+    drop |= np.any((position < lo - pad) | (position > hi + pad), axis=1)
     mesh.remove_vertices_by_mask(drop)
     mesh.remove_unreferenced_vertices()
     mesh.remove_degenerate_triangles()
