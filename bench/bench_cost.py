@@ -52,7 +52,7 @@ def _stage(stage: str, bag: Path, values: dict[str, Any], queue: Any) -> None:
             outcome = run_segmentation(settings, work / 'mesh')
             if not outcome.ok or outcome.analysis is None:
                 raise RuntimeError(outcome.reason)
-            summary = f'{len(outcome.analysis.report["rocks"])} rocks'
+            summary = f'{len(outcome.analysis.report.rocks)} rocks'
         else:
             result: Any = reconstruct(None, work, settings.recon, stage)[stage]
             if stage == 'sfm':

@@ -33,7 +33,7 @@ def _run(bag: Path, out: Path, params: Path | None) -> None:
     print(f'bag {bag}: {summary.frames} frames, {summary.keyframes} keyframes')
     if summary.recon and summary.recon.sparse:
         print(f'registered {summary.recon.sparse.registered}')
-    print(f'rocks {len(summary.report["rocks"]) if summary.report else "none"}')
+    print(f'rocks {len(summary.report.rocks) if summary.report else "none"}')
     for name, seconds in stages.items():
         print(f'  {name:<10} {seconds:7.1f} s')
     print(f'  {"frames+io":<10} {rest:7.1f} s  (decode, keyframes, passthrough, messages)')

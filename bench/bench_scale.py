@@ -125,8 +125,8 @@ def score(name: str, points, labels, truth_rocks, v, f, params: SegmentParams) -
             b_err.append(rock.b / truth_rocks[k][0] - 1)
     true_b = [truth_rocks[k][0] for k in visible]
     true_m = [truth_rocks[k][1] * SPECIFIC_GRAVITY * 1000 for k in visible]
-    d50_true = gradation(true_b, true_m)['d50']
-    d50 = gradation([r.b for r in rocks], [r.mass for r in rocks])['d50']
+    d50_true = gradation(true_b, true_m).d50
+    d50 = gradation([r.b for r in rocks], [r.mass for r in rocks]).d50
     a, b = v[f[:, 0]], v[f[:, 1]]
     return {
         'pile': name,

@@ -1,18 +1,20 @@
 """What each stage hands the next: one typed record per artefact, one JSON round trip for all.
 
-=========  ==================  ==========================================  ====================
-stage      reads               writes (work folder)                        type
-=========  ==================  ==========================================  ====================
-keyframes  bag, photos, video  ``keyframes/keyframes.jsonl`` + PNGs        :class:`KeyframeRecord`
-sfm        keyframes           ``sparse/`` (COLMAP) + ``sparse.json``      :class:`SparseSummary`
-dense      sparse model        ``dense/dense.ply`` + ``dense.json``        :class:`DenseSummary`
-mesh       dense cloud         ``mesh/mesh.ply`` + ``mesh.json``           :class:`MeshInfo`
-segment    mesh + MeshInfo     ``result/report.json`` + the result folder  ``report.json`` dict
-=========  ==================  ==========================================  ====================
+=========  ==================  ========================================  =========================
+stage      reads               writes (work folder)                      type
+=========  ==================  ========================================  =========================
+keyframes  bag, photos, video  ``keyframes/keyframes.jsonl`` + PNGs      :class:`KeyframeRecord`
+sfm        keyframes           ``sparse/`` (COLMAP) + ``sparse.json``    :class:`SparseSummary`
+dense      sparse model        ``dense/dense.ply`` + ``dense.json``      :class:`DenseSummary`
+mesh       dense cloud         ``mesh/mesh.ply`` + ``mesh.json``         :class:`MeshInfo`
+segment    mesh + MeshInfo     ``result/report.json`` + result folder    :class:`.result.Report`
+=========  ==================  ========================================  =========================
 
-Every record converts to the JSON it is stored as with :func:`to_json` and back with
-:func:`from_json` (one converter, driven by the field types), and the files carry a schema
-string that a reader checks: a newer version than this code knows is refused rather than misread.
+The segment stage's record and its parts (rocks, gradation, segmentation, mesh) are in
+:mod:`stockpile_ros.result`, beside this module. Every record converts to the JSON it is stored
+as with :func:`to_json` and back with :func:`from_json` (one converter, driven by the field types),
+and the files carry a schema string that a reader checks: a newer version than this code knows is
+refused rather than misread, and so is one older than a record still reads (``OLDEST_VERSION``).
 ``docs/formats.md`` says what every field means.
 """
 
@@ -21,7 +23,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import sys
 import types
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -448,7 +449,9 @@ def from_json(cls: type[T], data: Any, where: str = '') -> T:
 def _record(cls: type[Any], data: Any, where: str) -> Any:
     if not isinstance(data, dict):
         raise ArtefactError(f'{where}: expected an object, got {type(data).__name__}')
-    hints = get_type_hints(cls, vars(sys.modules[cls.__module__]))
+    # Each class of the MRO resolves its annotations in its own module (a record may extend a
+    # parameter type defined elsewhere).
+    hints = get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     values: dict[str, Any] = {}
     for name, f in fields.items():
@@ -504,7 +507,7 @@ def _value(tp: Any, value: Any, where: str) -> Any:
     raise ArtefactError(f'{where}: expected {tp.__name__}, got {value!r}')
 
 
-def _check_schema(expected: str, found: str, where: str) -> None:
+def _check_schema(expected: str, found: str, where: str, oldest: int = 1) -> None:
     family, _, version = expected.rpartition('/')
     got_family, _, got_version = found.rpartition('/')
     if got_family != family:
@@ -512,6 +515,9 @@ def _check_schema(expected: str, found: str, where: str) -> None:
     if not got_version.isdigit() or int(got_version) > int(version):
         raise ArtefactError(f'{where}: schema {found!r} is newer than this stockpile_ros reads '
                             f'({expected!r}); update it')  # fmt: skip
+    if int(got_version) < oldest:
+        raise ArtefactError(f'{where}: schema {found!r} is older than this stockpile_ros reads '
+                            f'({expected!r}); make it again')  # fmt: skip
 
 
 def save(record: Any, path: Path) -> None:
@@ -531,8 +537,11 @@ S = TypeVar('S', bound=_Schematic)
 def load(cls: type[S], path: Path) -> S:
     """Read a record with a schema, checking the schema and every field.
 
+    A record that no longer reads its earliest versions names the oldest it reads in an
+    ``OLDEST_VERSION`` class attribute (1 otherwise).
+
     Raises:
-        ArtefactError: Not JSON, another schema, a newer version, or a bad field.
+        ArtefactError: Not JSON, another schema, a newer or too old version, or a bad field.
 
     """
     try:
@@ -543,6 +552,7 @@ def load(cls: type[S], path: Path) -> S:
     if not isinstance(data, dict):
         raise ArtefactError(f'{path}: expected an object')
     # sparse.json and dense.json were written without one before version 1 was named.
-    _check_schema(expected, str(data.get('schema', expected)), str(path))
+    oldest = int(getattr(cls, 'OLDEST_VERSION', 1))
+    _check_schema(expected, str(data.get('schema', expected)), str(path), oldest)
     data['schema'] = expected
     return from_json(cls, data, str(path))

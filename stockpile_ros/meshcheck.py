@@ -16,7 +16,7 @@ and OFF through open3d, PLY headers checked against the file size first) and han
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +83,7 @@ class MeshCheck:
         faces_read: Faces as read.
         degenerate_faces: Faces dropped for a repeated vertex index or zero area.
         duplicate_faces: Faces dropped for the vertex set of an earlier face.
+        faces_kept: Faces left after the drops.
         units: Units the mesh was taken to be in.
         metres_per_unit: Scale applied to the vertices to give metres.
         extent_m: Longest side of the bounding box of the kept faces [m].
@@ -98,6 +99,7 @@ class MeshCheck:
     faces_read: int
     degenerate_faces: int
     duplicate_faces: int
+    faces_kept: int
     units: str
     metres_per_unit: float
     extent_m: float
@@ -105,15 +107,6 @@ class MeshCheck:
     plausible: bool
     likely_units: str | None
     warnings: list[str] = field(default_factory=list)
-
-    @property
-    def faces_kept(self) -> int:
-        """Faces left after the drops."""
-        return self.faces_read - self.degenerate_faces - self.duplicate_faces
-
-    def as_dict(self) -> dict[str, Any]:
-        """Return a JSON-ready dict (for a report)."""
-        return {**asdict(self), 'faces_kept': self.faces_kept}
 
 
 def _degenerate(vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]) -> Any:
@@ -204,8 +197,9 @@ def check_mesh(
     )
     plausible = _plausible(extent, edge)
     check = MeshCheck(
-        str(source), len(vertices), len(mesh.faces), int(degenerate.sum()), duplicates, units,
-        scale, extent, edge, plausible, None if plausible else _likely_units(extent, edge, scale),
+        str(source), len(vertices), len(mesh.faces), int(degenerate.sum()), duplicates,
+        len(unique), units, scale, extent, edge, plausible,
+        None if plausible else _likely_units(extent, edge, scale),
     )  # fmt: skip
     if check.degenerate_faces:
         check.warnings.append(

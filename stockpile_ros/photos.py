@@ -14,13 +14,13 @@ import dataclasses
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from .artefacts import MeshInfo, SparseSummary, WorkFolder, load
 from .components import result_lines
 from .errors import CaptureError, StockpileError
 from .recon.sources import source_kind
 from .recon.stages import run_keyframes
+from .result import Report
 from .runner import Outcome, run_reconstruction, run_segmentation
 from .runs import claim
 from .segment.provenance import Provenance
@@ -42,7 +42,7 @@ class SourceSummary:
         recon: The reconstruction's outcome, None when no keyframe was kept.
         outcome: The last stage's outcome.
         mesh: What the reconstruction says of its mesh, None when it did not get that far.
-        report: The report.json dict, None when no result was produced.
+        report: The report, None when no result was produced.
         work_dir: Work folder.
         result_dir: Result folder.
         problems: What went wrong, one line each.
@@ -57,7 +57,7 @@ class SourceSummary:
     recon: Outcome | None = None
     outcome: Outcome | None = None
     mesh: MeshInfo | None = None
-    report: dict[str, Any] | None = None
+    report: Report | None = None
     work_dir: Path = Path()
     result_dir: Path = Path()
     problems: list[str] = field(default_factory=list)

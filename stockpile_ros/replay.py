@@ -23,6 +23,7 @@ from .bagdrive import BagInputs, bag_inputs, drive
 from .bagio.reader import BagReader, ReadStats
 from .bagio.writer import PARTIAL_SUFFIX, BagWriter
 from .components import KeyframeComponent, ReconstructionComponent, SegmentationComponent
+from .result import Report
 from .ros import topics
 from .ros.publications import DIAGNOSTIC_PREFIX, Publication, diagnostics, status
 from .runner import Outcome
@@ -54,7 +55,7 @@ class ReplaySummary:
         recon: The last reconstruction's outcome.
         outcome: The last run's final outcome (the segmentation's when the reconstruction ended
             well).
-        report: The last report.json dict, None when no result was produced.
+        report: The last report, None when no result was produced.
         work_dir: Work folder.
         result_dir: Result folder.
         output_bag: The output MCAP bag folder.
@@ -73,7 +74,7 @@ class ReplaySummary:
     camera_info: bool = False
     recon: Outcome | None = None
     outcome: Outcome | None = None
-    report: dict[str, Any] | None = None
+    report: Report | None = None
     work_dir: Path = Path()
     result_dir: Path = Path()
     output_bag: Path = Path()

@@ -233,10 +233,10 @@ def run_segmentation(
             spec=spec, mesh_info=info, source=str(mesh_dir / 'mesh.ply'),
             report_options=options,
         )  # fmt: skip
-        analysis.report['mesh']['check'] = check.as_dict()
+        analysis.report.mesh.check = check
         if info.scale.metric:
             # In model units (no scale) a size in metres says nothing.
-            analysis.report['warnings'][:0] = check.warnings
+            analysis.report.warnings[:0] = check.warnings
         made = provenance or Provenance.for_input(
             mesh_dir / 'mesh.ply', settings.values, defaults()
         )

@@ -1,13 +1,19 @@
-"""Meshes shared by the segmentation tests: a small synthetic pile and height fields."""
+"""Shared by the segmentation tests: a small synthetic pile, height fields, a made-up report."""
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
 
+from stockpile_ros.artefacts import KeyframePose, ScaleRecord
+from stockpile_ros.result import MeasureRecord, MeshRecord, Report, RockRecord, SegmentationRecord
+from stockpile_ros.segment.params import RockScale
+from stockpile_ros.segment.pipeline import grade
+from stockpile_ros.segment.qa import ReportOptions
 from stockpile_ros.tools.synthetic import make_pile, poisson_mesh
 
 
@@ -30,3 +36,35 @@ def height_field(
     a, b, c, d = k[:-1, :-1].ravel(), k[1:, :-1].ravel(), k[1:, 1:].ravel(), k[:-1, 1:].ravel()
     f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return v, f
+
+
+def make_report(
+    rocks: list[RockRecord],
+    scale: ScaleRecord,
+    keyframes: list[KeyframePose] | None = None,
+    frame_id: str = 'stockpile',
+    d50: float | None = None,
+) -> Report:
+    """A report of the given rocks, as a result folder's ``report.json`` holds one.
+
+    Its gradation is of no rock but for ``d50``; its segmentation and mesh are placeholders.
+    """
+    gradation = grade([], None, scale.rel_uncertainty, ReportOptions(resamples=100), scale.metric)
+    segmentation = SegmentationRecord(
+        scale=RockScale(0.005, 0.1, 'mesh', 0.1, 0.0075, 0.015),
+        raw_regions=len(rocks),
+        segments=len(rocks),
+        rocks_measured=len(rocks),
+        seconds=0.0,
+        measure=MeasureRecord(),
+    )
+    return Report(
+        frame_id=frame_id,
+        units='m' if scale.metric else 'model',
+        scale=scale,
+        keyframes=keyframes or [],
+        rocks=rocks,
+        gradation=replace(gradation, d50=d50),
+        segmentation=segmentation,
+        mesh=MeshRecord(faces=0, vertices=0, source='made up'),
+    )

@@ -1,4 +1,4 @@
-"""The stage artefacts: one JSON round trip each, schemas checked, bad fields refused."""
+"""Stage artefacts and the report: one JSON round trip each, schemas checked, bad fields refused."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from segment_fixtures import small_pile
 
 from stockpile_ros.artefacts import (
     ArtefactError,
@@ -28,6 +29,28 @@ from stockpile_ros.artefacts import (
     to_json,
 )
 from stockpile_ros.camera import CameraModel
+from stockpile_ros.meshcheck import MeshCheck, check_mesh
+from stockpile_ros.meshio import LabelledMesh
+from stockpile_ros.result import (
+    ClassDecision,
+    GradationCurve,
+    GradationRecord,
+    Intervals,
+    LimitRow,
+    MeasureRecord,
+    MeshRecord,
+    ProvenanceRecord,
+    ProvenanceScale,
+    Report,
+    RockRecord,
+    RosinRammler,
+    SegmentationRecord,
+    Sieve,
+)
+from stockpile_ros.segment.gradation import load_class_table
+from stockpile_ros.segment.measure import MeasureParams
+from stockpile_ros.segment.params import RockScale, SegmentParams
+from stockpile_ros.segment.pipeline import analyse_mesh
 
 
 def _mesh_info() -> MeshInfo:
@@ -83,11 +106,68 @@ def test_a_bad_field_is_refused_with_where_it_is(change: dict[str, object], why:
         from_json(MeshInfo, data)
 
 
+@pytest.fixture(scope='module')
+def report() -> Report:
+    """A report of a small synthetic pile, metric, checked against a class, every part filled."""
+    v, f, _ = small_pile()
+    mesh, check = check_mesh(LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)), 'pile.ply')
+    analysis = analyse_mesh(mesh.vertices, mesh.faces, mesh_info=_mesh_info(),
+                            spec=load_class_table()['classes']['I'], source='pile.ply')  # fmt: skip
+    made = analysis.report
+    made.mesh.check = check
+    made.mesh.model_to_stockpile = SimilarityRecord(2.0)
+    made.provenance = ProvenanceRecord(
+        input_path='pile.ply', keyframes_used=1, scale=ProvenanceScale('target', 0.002, 'ChArUco')
+    )
+    return made
+
+
+def test_the_report_survives_its_round_trip(tmp_path: Path, report: Report) -> None:
+    assert report.rocks and report.gradation.spec.limits and report.gradation.sieves
+    path = tmp_path / 'report.json'
+    save(report, path)
+    again = load(Report, path)
+    assert again == report
+    assert to_json(again) == to_json(report)
+    assert json.loads(path.read_text())['schema'] == 'stockpile-report/3'
+
+
+def test_a_report_missing_a_field_or_of_another_version_is_refused(
+    tmp_path: Path, report: Report
+) -> None:
+    path = tmp_path / 'report.json'
+    data = to_json(report)
+    for version, why in ((4, 'newer'), (2, 'older')):
+        path.write_text(json.dumps({**data, 'schema': f'stockpile-report/{version}'}))
+        with pytest.raises(ArtefactError, match=why) as info:
+            load(Report, path)
+        assert str(path) in str(info.value)
+    rock = {k: v for k, v in data['rocks'][0].items() if k != 'b'}
+    path.write_text(json.dumps({**data, 'rocks': [rock]}))
+    with pytest.raises(ArtefactError, match=r"report\.json\.rocks\[0\]: 'b' missing"):
+        load(Report, path)
+    spec = {**data['gradation']['spec'], 'verdict': 'MAYBE'}
+    path.write_text(json.dumps({**data, 'gradation': {**data['gradation'], 'spec': spec}}))
+    with pytest.raises(ArtefactError, match=r'gradation\.spec\.verdict: .* not one of'):
+        load(Report, path)
+    path.write_text(json.dumps({**data, 'units': 'model'}))
+    with pytest.raises(ArtefactError, match='units'):
+        load(Report, path)
+
+
 def test_docs_name_every_field() -> None:
     doc = (Path(__file__).resolve().parent.parent / 'docs' / 'formats.md').read_text()
     records = (KeyframeRecord, OdometryEntry, KeyframeSummary, SparseSummary, ModelImages,
-               DenseSummary, MeshInfo, ScaleRecord, SimilarityRecord, KeyframePose)  # fmt: skip
+               DenseSummary, MeshInfo, ScaleRecord, SimilarityRecord, KeyframePose, Report,
+               RockRecord, GradationCurve, GradationRecord, Intervals, ClassDecision, LimitRow,
+               RosinRammler, Sieve, SegmentationRecord, RockScale, MeasureRecord, MeshRecord,
+               MeshCheck, ProvenanceRecord, ProvenanceScale)  # fmt: skip
     for record in records:
-        missing = [f.name for f in dataclasses.fields(record) if f.name != 'extra']
-        missing = [name for name in missing if f'`{name}`' not in doc and f'"{name}"' not in doc]
+        names = [f.name for f in dataclasses.fields(record) if f.name != 'extra']
+        # The parameters a record extends are those of the parameter table (config/stockpile.yaml).
+        for parameters in (SegmentParams, MeasureParams):
+            if issubclass(record, parameters):
+                inherited = {f.name for f in dataclasses.fields(parameters)}
+                names = [name for name in names if name not in inherited]
+        missing = [name for name in names if f'`{name}`' not in doc and f'"{name}"' not in doc]
         assert not missing, f'{record.__name__}: docs/formats.md does not name {missing}'

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from segment_fixtures import small_pile
 
+from stockpile_ros.artefacts import load
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+from stockpile_ros.result import Report
 from stockpile_ros.settings import load_params_yaml
 
 
@@ -115,8 +117,9 @@ def test_segment_uses_the_table_and_records_it_in_the_result_folder(tmp_path: Pa
     argv = ['segment', str(mesh), '--out', str(out), '--mode', 'paper', '--threshold', '0.93',
             '--set', 'measure.specific_gravity=3.0']  # fmt: skip
     assert main(argv) == 0
-    report = (out / 'report.json').read_text()
-    assert '"threshold": 0.93' in report and '"mode": "paper"' in report
+    report = load(Report, out / 'report.json')
+    assert report.segmentation.threshold == 0.93 and report.segmentation.mode == 'paper'
+    assert report.segmentation.measure.specific_gravity == 3.0
     values = load_params_yaml(out / 'params.yaml')
     assert values['segment.threshold'] == 0.93 and values['segment.exclude_ground'] is False
     assert values['measure.specific_gravity'] == 3.0

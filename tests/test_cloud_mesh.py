@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 
 import laspy
@@ -11,6 +10,7 @@ import open3d as o3d
 import pytest
 from scipy.spatial.transform import Rotation
 
+from stockpile_ros.artefacts import load
 from stockpile_ros.cli import main
 from stockpile_ros.cloud import (
     Cloud,
@@ -24,6 +24,7 @@ from stockpile_ros.cloud import (
 )
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.recon.surface import PoissonOptions
+from stockpile_ros.result import Report
 from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation
 from stockpile_ros.tools.sim.survey import score_survey, simulate_survey
 
@@ -130,9 +131,10 @@ def test_a_simulated_survey_from_file_to_report(survey) -> None:  # type: ignore
     np.savetxt(path, s.points, fmt='%.5f')
     out = root / 'result'
     assert main(['segment', str(path), '--out', str(out), '--units', 'm']) == 0
-    report = json.loads((out / 'report.json').read_text())
-    assert report['units'] == 'm' and report['scale']['method'] == 'given'
-    assert report['mesh']['cloud']['up']['tilt_deg'] == pytest.approx(10.0, abs=1.0)
+    report = load(Report, out / 'report.json')
+    assert report.units == 'm' and report.scale.method == 'given'
+    assert report.mesh.cloud is not None
+    assert report.mesh.cloud['up']['tilt_deg'] == pytest.approx(10.0, abs=1.0)
     scores = score_survey(out, root / 'truth', s)
     found = scores['detection']
     # Measured: 29 visible rocks, 46 reported (10 split in two), recall 0.93, precision 0.59,
@@ -149,8 +151,8 @@ def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-unty
     o3d.io.write_point_cloud(ply, o3d.geometry.PointCloud(o3d.utility.Vector3dVector(s.points)))
     out = root / 'model'
     assert main(['segment', str(ply), '--out', str(out), '--spec-class', 'I']) == 0
-    report = json.loads((out / 'report.json').read_text())
-    assert report['units'] == 'model' and report['gradation']['spec']['verdict'] == 'REFUSED'
+    report = load(Report, out / 'report.json')
+    assert report.units == 'model' and report.gradation.spec.verdict == 'REFUSED'
     assert 'no --units' in capsys.readouterr().err
     header = laspy.LasHeader(point_format=3, version='1.4')
     header.offsets = s.points.min(axis=0)
@@ -161,9 +163,9 @@ def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-unty
     las.write(str(laz))
     out = root / 'las'
     assert main(['segment', str(laz), '--out', str(out)]) == 0
-    report = json.loads((out / 'report.json').read_text())
-    assert report['units'] == 'm' and report['scale']['method'] == 'input units'
-    assert len(report['rocks']) > 10
+    report = load(Report, out / 'report.json')
+    assert report.units == 'm' and report.scale.method == 'input units'
+    assert len(report.rocks) > 10
 
 
 def test_a_foreign_mesh_is_levelled_only_when_up_is_given(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -185,10 +187,11 @@ def test_a_foreign_mesh_is_levelled_only_when_up_is_given(tmp_path) -> None:  # 
                                            np.zeros(len(f), dtype=np.int32)))  # fmt: skip
     kept, levelled = tmp_path / 'kept', tmp_path / 'levelled'
     assert main(['segment', str(path), '--out', str(kept), '--units', 'm']) == 0
-    assert 'model_to_stockpile' not in json.loads((kept / 'report.json').read_text())['mesh']
+    assert load(Report, kept / 'report.json').mesh.model_to_stockpile is None
     assert main(['segment', str(path), '--out', str(levelled), '--units', 'm', '--up', 'fit']) == 0
-    report = json.loads((levelled / 'report.json').read_text())
-    rotation = np.asarray(report['mesh']['model_to_stockpile']['rotation']).reshape(3, 3)
+    levelling = load(Report, levelled / 'report.json').mesh.model_to_stockpile
+    assert levelling is not None
+    rotation = np.asarray(levelling.rotation).reshape(3, 3)
     assert rotation[2] @ (tilt @ [0.0, 0.0, 1.0]) > 0.999
     z = read_labelled_mesh(levelled / 'segments.ply').vertices[:, 2]
     assert np.percentile(z, 1) == pytest.approx(0.0, abs=1e-3) and z.max() < 0.15

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +9,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
+from stockpile_ros.artefacts import MeshInfo, load
 from stockpile_ros.bagdrive import bag_inputs
 from stockpile_ros.bagio.reader import BagReader
 from stockpile_ros.bagio.writer import BagWriter
@@ -121,11 +121,11 @@ def test_a_lidar_bag_replays_to_a_metric_result(tmp_path: Path) -> None:
     bag = write_scan_bag(tmp_path / 'bag', survey, scans=12)
     summary = replay(bag, tmp_path / 'out', build_settings({}))
     assert summary.ok and summary.cloud_topic == '/points' and summary.image_topic == ''
-    info = json.loads((tmp_path / 'out' / 'work' / 'mesh' / 'mesh.json').read_text())
-    assert info['scale']['method'] == 'sensor' and info['units'] == 'm'
-    assert info['cloud']['stream']['placed'] == 12 and info['cloud']['stream']['frame_id'] == 'odom'
-    assert 'towards its sensor' in info['cloud']['normals']
-    assert summary.report is not None and summary.report['units'] == 'm'
+    info = load(MeshInfo, tmp_path / 'out' / 'work' / 'mesh' / 'mesh.json')
+    assert info.scale.method == 'sensor' and info.units == 'm' and info.cloud is not None
+    assert info.cloud['stream']['placed'] == 12 and info.cloud['stream']['frame_id'] == 'odom'
+    assert 'towards its sensor' in info.cloud['normals']
+    assert summary.report is not None and summary.report.units == 'm'
     scores = score_survey(tmp_path / 'out' / 'result', tmp_path / 'truth', survey, info)
     found = scores['detection']
     assert found['recall_visible'] >= 0.5 and found['precision_visible'] >= 0.7, found

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,9 +18,12 @@ import numpy as np
 import open3d as o3d
 import pytest
 from scipy.spatial.transform import Rotation
+from segment_fixtures import make_report
 
+from stockpile_ros.artefacts import KeyframePose, ScaleRecord, save
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+from stockpile_ros.result import RockRecord
 from stockpile_ros.tools.evaluation import (
     EvaluationError,
     EvaluationOptions,
@@ -186,37 +190,45 @@ def make_result(
     t = np.asarray(translation)
     jitter = np.random.default_rng(0).normal(scale=noise, size=truth.mesh.vertices.shape)
     moved = scale * (truth.mesh.vertices + jitter + np.asarray(mesh_shift)) @ rot.T + t
-    out_rocks = copy.deepcopy(truth.data['rocks'] if rocks is None else rocks)
-    for r in out_rocks:
-        r['centroid'] = (scale * rot @ np.asarray(r['centroid']) + t).tolist()
-        for q in ('a', 'b', 'c', 'esd'):
-            r[q] *= scale
-        r['volume'] *= scale**3
-        r['visible_area'] = r.pop('area', 0.0)
+    out_rocks = [
+        RockRecord(
+            id=r['id'],
+            centroid=(scale * rot @ np.asarray(r['centroid']) + t).tolist(),
+            orientation_xyzw=[0.0, 0.0, 0.0, 1.0],
+            a=scale * r['a'],
+            b=scale * r['b'],
+            c=scale * r['c'],
+            esd=scale * r['esd'],
+            volume=scale**3 * r['volume'],
+            mass=r['mass'],
+            visible_area=r['area'],
+            visible_fraction=r['visible_fraction'],
+            fer=r['a'] / r['c'],
+            sphericity=1.0,
+            confidence=1.0,
+        )
+        for r in (truth.data['rocks'] if rocks is None else rocks)
+    ]
     keyframes = []
     for cam in truth.data['cameras'][::keyframe_step]:
         r_cam = Rotation.from_quat(cam['orientation_xyzw']).as_matrix()
         keyframes.append(
-            {
-                'stamp_ns': cam['stamp_ns'] + stamp_offset_ns,
-                'position': (scale * rot @ np.asarray(cam['position']) + t).tolist(),
-                'orientation_xyzw': Rotation.from_matrix(rot @ r_cam).as_quat().tolist(),
-            }
+            KeyframePose(
+                stamp_ns=cam['stamp_ns'] + stamp_offset_ns,
+                position=(scale * rot @ np.asarray(cam['position']) + t).tolist(),
+                orientation_xyzw=Rotation.from_matrix(rot @ r_cam).as_quat().tolist(),
+            )
         )
-    report = {
-        'schema': 'stockpile-report/1',
-        'frame_id': frame_id,
-        'units': 'm',
-        'scale': {'method': method, 'metres_per_unit': 1.0, 'rel_uncertainty': None},
-        'keyframes': keyframes,
-        'rocks': out_rocks,
-        'gradation': {'d50': truth.data['gradation']['d50'] * scale},
-        'segmentation': {},
-        'mesh': {},
-    }
+    report = make_report(
+        out_rocks,
+        ScaleRecord(method),
+        keyframes,
+        frame_id,
+        d50=truth.data['gradation']['d50'] * scale,
+    )
     folder = root / name
     folder.mkdir()
-    (folder / 'report.json').write_text(json.dumps(report))
+    save(report, folder / 'report.json')
     lab = truth.mesh.labels if labels is None else labels
     write_labelled_mesh(folder / 'segments.ply', LabelledMesh(moved, truth.mesh.faces, lab))
     return folder
@@ -473,6 +485,21 @@ def test_unalignable_result_is_a_clear_error(tmp_path: Path, truth: Truth) -> No
     assert (ev['scale']['error'], ev['scale']['abs_error']) == (None, None)
     assert 'not measured' in ev['scale']['note']
     _assert_all_detected(ev)
+
+
+def test_a_report_this_code_does_not_read_is_refused_with_where_it_is(
+    tmp_path: Path, truth: Truth
+) -> None:
+    result = make_result(tmp_path, truth, 'old')
+    path = result / 'report.json'
+    data = json.loads(path.read_text())
+    path.write_text(json.dumps({**data, 'schema': 'stockpile-report/2'}))
+    with pytest.raises(EvaluationError, match=f'{re.escape(str(path))}: schema .* is older'):
+        evaluate(result, truth.path)
+    del data['rocks'][0]['b']
+    path.write_text(json.dumps(data))
+    with pytest.raises(EvaluationError, match=r"rocks\[0\]: 'b' missing"):
+        evaluate(result, truth.path)
 
 
 def test_cli_prints_a_table_and_writes_json(

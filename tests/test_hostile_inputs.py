@@ -20,9 +20,12 @@ import numpy as np
 import pytest
 from segment_fixtures import small_pile
 
+from stockpile_ros.artefacts import load
 from stockpile_ros.bagio.writer import BagWriter
 from stockpile_ros.cli import main
+from stockpile_ros.meshcheck import MeshCheck
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+from stockpile_ros.result import Report
 from stockpile_ros.ros import messages as m
 
 S = 1_000_000_000
@@ -293,16 +296,21 @@ def test_malformed_meshes_are_refused_with_the_cause(
 
 def _segment(
     capsys: pytest.CaptureFixture[str], mesh: Path, out: Path, *args: str
-) -> tuple[int, str, dict[str, Any]]:
+) -> tuple[int, str, Report]:
     code, _, err, peak = _run(capsys, ['segment', str(mesh), '--out', str(out), *args])
     assert code == 0, err
     assert peak < PEAK_BOUND
-    return code, err, json.loads((out / 'report.json').read_text())
+    return code, err, load(Report, out / 'report.json')
 
 
-def _rocks(report: dict[str, Any]) -> list[float]:
+def _check(report: Report) -> MeshCheck:
+    assert report.mesh.check is not None
+    return report.mesh.check
+
+
+def _rocks(report: Report) -> list[float]:
     """Each rock's intermediate dimension and volume, in report order (mass is null unscaled)."""
-    return [value for r in report['rocks'] for value in (r['b'], r['volume'])]
+    return [value for r in report.rocks for value in (r.b, r.volume)]
 
 
 def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_result(
@@ -310,7 +318,7 @@ def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_res
 ) -> None:
     v, f, _ = small_pile()
     _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
-    assert clean['mesh']['check']['duplicate_faces'] == 0
+    assert _check(clean).duplicate_faces == 0
     # Each face three times (the copies with their vertices rotated and reversed), then faces
     # that repeat a vertex and a zero-area face over three collinear vertices.
     far = len(v)
@@ -319,12 +327,12 @@ def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_res
     faces = np.concatenate([f, f[:, [1, 2, 0]], f[:, ::-1], bad])
     mesh = _ply(tmp_path / 'tripled.ply', np.concatenate([v, line]), faces)
     _, err, tripled = _segment(capsys, mesh, tmp_path / 't')
-    check = tripled['mesh']['check']
-    assert (check['duplicate_faces'], check['degenerate_faces']) == (2 * len(f), 3)
-    assert check['faces_kept'] == len(f)
+    check = _check(tripled)
+    assert (check.duplicate_faces, check.degenerate_faces) == (2 * len(f), 3)
+    assert check.faces_kept == len(f)
     assert f'{2 * len(f)} duplicate faces dropped' in err and '3 degenerate faces' in err
     assert _rocks(tripled) == pytest.approx(_rocks(clean))
-    assert len(tripled['rocks']) == len(clean['rocks']) > 0
+    assert len(tripled.rocks) == len(clean.rocks) > 0
 
 
 def test_many_zero_length_edges_do_not_hang_the_segmentation(
@@ -335,8 +343,8 @@ def test_many_zero_length_edges_do_not_hang_the_segmentation(
     zero = np.repeat(np.arange(len(f) * 2)[:, None] % len(v), 3, axis=1)
     mesh = _ply(tmp_path / 'mesh.ply', v, np.concatenate([f, zero]))
     _, _, report = _segment(capsys, mesh, tmp_path / 'r')
-    assert report['mesh']['check']['degenerate_faces'] == 2 * len(f)
-    assert report['segmentation']['seconds'] < 60
+    assert _check(report).degenerate_faces == 2 * len(f)
+    assert report.segmentation.seconds < 60
 
 
 @pytest.mark.parametrize(
@@ -362,7 +370,7 @@ def test_a_mesh_in_other_units_is_refused_unless_its_units_are_given(
     )
     _, _, scaled = _segment(capsys, mesh, tmp_path / 's', '--units', units)
     assert _rocks(scaled) == pytest.approx(_rocks(clean), rel=1e-4)
-    assert scaled['mesh']['check']['units'] == units
+    assert _check(scaled).units == units
 
 
 def test_explicit_units_on_an_implausibly_small_mesh_finish_and_warn(
@@ -375,9 +383,9 @@ def test_explicit_units_on_an_implausibly_small_mesh_finish_and_warn(
     argv = ['segment', str(mesh), '--out', str(tmp_path / 'r'), '--units', 'm']
     code, _, err, _ = _run(capsys, argv)
     assert code == 0 and 'implausible' in err
-    report = json.loads((tmp_path / 'r' / 'report.json').read_text())
-    assert not report['mesh']['check']['plausible']
-    assert any('implausible' in w for w in report['warnings'])
+    report = load(Report, tmp_path / 'r' / 'report.json')
+    assert not _check(report).plausible
+    assert any('implausible' in w for w in report.warnings)
 
 
 # --- bags with bad poses, cameras and sizes; parameters; output folders; interruptions --------

@@ -73,7 +73,7 @@ def test_segmentation_outputs_carry_every_rock() -> None:
     assert set(out) == {topics.SEGMENTED_CLOUD, topics.ROCK_MARKERS, topics.ROCKS,
                         topics.GRADATION}  # fmt: skip
     rocks = _roundtrip(out[topics.ROCKS])
-    assert len(rocks.rocks) == len(analysis.report['rocks']) > 0
+    assert len(rocks.rocks) == len(analysis.report.rocks) > 0
     cloud = _roundtrip(out[topics.SEGMENTED_CLOUD])
     assert cloud.width == len(analysis.faces)
     assert [fl.name for fl in cloud.fields] == ['x', 'y', 'z', 'rgb', 'label']

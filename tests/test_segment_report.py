@@ -7,22 +7,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from segment_fixtures import small_pile
+from segment_fixtures import make_report, small_pile
 
-from stockpile_ros.artefacts import MeshInfo, from_json
+from stockpile_ros.artefacts import KeyframePose, MeshInfo, ScaleRecord, from_json, load
 from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
+from stockpile_ros.result import Report
 from stockpile_ros.ros import messages as m
 from stockpile_ros.ros import topics
 from stockpile_ros.ros.publications import capture_warnings
 from stockpile_ros.ros.typestore import typestore
 from stockpile_ros.segment.measure import RockMeasure, visibility_warnings
-
-ROCK_KEYS = {'id', 'centroid', 'a', 'b', 'c', 'esd', 'volume', 'mass', 'visible_area',
-             'visible_fraction', 'fer', 'sphericity', 'confidence', 'orientation_xyzw'}  # fmt: skip
-GRAD_KEYS = {'size_measure', 'sizes', 'percent_passing_count', 'percent_passing_mass', 'd10',
-             'd15', 'd30', 'd50', 'd60', 'd85', 'd100', 'cu', 'cc', 'rock_count', 'total_mass',
-             'spec', 'intervals', 'rosin_rammler', 'sieves'}  # fmt: skip
+from stockpile_ros.segment.pipeline import analyse_mesh
 
 
 def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
@@ -42,53 +38,55 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     ])  # fmt: skip
     assert status == 0
     assert 'rocks' in capsys.readouterr().out
-    report = json.loads((out / 'report.json').read_text(), parse_constant=lambda c: 1 / 0)
-    assert report['schema'] == 'stockpile-report/2'
-    assert report['units'] == 'm' and report['frame_id'] == 'stockpile'
+    # JSON has no NaN: an undefined number is written as null.
+    json.loads((out / 'report.json').read_text(), parse_constant=lambda c: 1 / 0)
+    report = load(Report, out / 'report.json')
+    assert report.schema == 'stockpile-report/3'
+    assert report.units == 'm' and report.frame_id == 'stockpile'
     # The scale and the keyframes come from mesh.json, the scale's parts and note filled in.
-    assert report['scale'] == {**info['scale'], 'parts': {}, 'note': ''}
-    assert report['keyframes'] == [{**k, 'file': ''} for k in info['keyframes']]
-    assert len(report['rocks']) >= 3
-    for rock in report['rocks']:
-        assert set(rock) == ROCK_KEYS
-        assert rock['a'] >= rock['b'] >= rock['c'] > 0
-        assert 0 <= rock['confidence'] <= 1 and 0 < rock['visible_fraction'] <= 1
-    assert set(report['gradation']) == GRAD_KEYS
-    spec = report['gradation']['spec']
-    assert spec['class'] == 'I' and spec['checked']
-    assert spec['verdict'] in ('PASS', 'FAIL', 'UNDECIDED')
-    assert spec['passed'] == {'PASS': True, 'FAIL': False}.get(spec['verdict'])
-    assert [row['key'] for row in spec['limits']] == ['d15', 'd50', 'd85', 'd100']
-    assert 'NCHRP Report 568' in spec['standard'] and 'check the limits' in spec['caveat']
+    assert report.scale == ScaleRecord('target', 0.5, 0.01)
+    assert report.keyframes == [KeyframePose(5, [1, 2, 3], [0, 0, 0, 1])]
+    assert len(report.rocks) >= 3
+    for rock in report.rocks:
+        assert rock.a >= rock.b >= rock.c > 0
+        assert 0 <= rock.confidence <= 1 and 0 < rock.visible_fraction <= 1
+    spec = report.gradation.spec
+    assert spec.class_name == 'I' and spec.checked
+    assert spec.verdict in ('PASS', 'FAIL', 'UNDECIDED')
+    assert spec.passed == {'PASS': True, 'FAIL': False}.get(spec.verdict)
+    assert [row.key for row in spec.limits] == ['d15', 'd50', 'd85', 'd100']
+    assert 'NCHRP Report 568' in spec.standard and 'check the limits' in spec.caveat
     for key in ('d15', 'd50', 'd85'):
-        lo, hi = report['gradation']['intervals']['mass'][key]
-        value = report['gradation'][key]
+        lo, hi = report.gradation.intervals.mass[key]
+        value = report.gradation.characteristic[key]
         assert value is None or lo is None or lo <= value <= hi
-    prov = report['provenance']
-    assert prov['input_path'] == str(mesh_path) and len(prov['input_sha256']) == 64
-    assert prov['parameters_changed'] == {'gradation.spec_class': 'I'}
-    assert prov['keyframes_used'] == 1 and prov['scale']['method'] == 'target'
-    assert prov['created'].endswith('+00:00') and prov['tool_version']
-    assert report['segmentation']['mode'] == 'default'
+    prov = report.provenance
+    assert prov is not None
+    assert prov.input_path == str(mesh_path) and len(prov.input_sha256) == 64
+    assert prov.parameters_changed == {'gradation.spec_class': 'I'}
+    assert prov.keyframes_used == 1 and prov.scale.method == 'target'
+    assert prov.created.endswith('+00:00') and prov.tool_version
+    assert report.segmentation.mode == 'default'
     # The class checked asks for the smallest rock of interest: half class I's smallest D15. This
     # mesh is too coarse for it: the floor of min_rock_edges applies, and the result says so.
-    scale = report['segmentation']['scale']
-    assert scale['source'] == 'class' and scale['requested'] == pytest.approx(0.5 * 3.7 * 0.0254)
-    assert scale['edge'] > 0
-    floor = report['segmentation']['min_rock_edges'] * scale['edge']
-    assert scale['min_rock_b'] == pytest.approx(max(scale['requested'], floor))
-    assert any('the mesh resolves' in w for w in report['warnings'])
-    assert report['mesh']['faces'] == len(f)
-    assert any('kf_00044_000145.png' in w for w in report['warnings'])
+    scale = report.segmentation.scale
+    assert scale.source == 'class' and scale.requested == pytest.approx(0.5 * 3.7 * 0.0254)
+    assert scale.edge > 0
+    floor = report.segmentation.min_rock_edges * scale.edge
+    assert scale.min_rock_b == pytest.approx(max(scale.requested, floor))
+    assert any('the mesh resolves' in w for w in report.warnings)
+    assert report.mesh.faces == len(f)
+    assert report.mesh.check is not None and report.mesh.check.faces_kept == len(f)
+    assert any('kf_00044_000145.png' in w for w in report.warnings)
     seg = read_labelled_mesh(out / 'segments.ply')
     assert len(seg.faces) == len(f)
-    assert set(np.unique(seg.labels)) >= {r['id'] for r in report['rocks']}
+    assert set(np.unique(seg.labels)) >= {r.id for r in report.rocks}
     rows = (out / 'rocks.csv').read_text().strip().splitlines()
-    assert len(rows) == len(report['rocks']) + 1
+    assert len(rows) == len(report.rocks) + 1
     html = (out / 'index.html').read_text()
     assert 'data:image/png;base64,' in html and 'Stockpile report' in html
     assert 'src="http' not in html and 'src="file' not in html
-    assert spec['caveat'][:40] in html and 'No keyframe photo' in html
+    assert spec.caveat[:40] in html and 'No keyframe photo' in html
     assert 'D50 by mass' in html and '[mm]' in html
     for name in ('gradation.png', 'render.png'):
         assert (out / name).read_bytes()[:4] == b'\x89PNG'
@@ -97,14 +95,12 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
 
 
 def test_orientation_is_the_measured_axes() -> None:
-    from stockpile_ros.segment.pipeline import analyse_mesh
-
     v, f, _ = small_pile()
     analysis = analyse_mesh(v, f)
     labels = analysis.segmentation.labels
-    for rock in analysis.report['rocks']:
-        rot = Rotation.from_quat(rock['orientation_xyzw']).as_matrix()
-        pts = v[np.unique(f[labels == rock['id']])] - rock['centroid']
+    for rock in analysis.report.rocks:
+        rot = Rotation.from_quat(rock.orientation_xyzw).as_matrix()
+        pts = v[np.unique(f[labels == rock.id])] - rock.centroid
         extent = np.ptp(pts @ rot, axis=0)
         # x along a, z along c: the visible surface is longest along x and shortest along z.
         assert extent[0] >= extent[1] >= extent[2] * 0.999
@@ -119,15 +115,15 @@ def test_a_run_without_scale_shows_no_metres_and_no_verdict(tmp_path, capsys) ->
     assert main(['segment', str(mesh_path), '--out', str(out), '--spec-class', 'I']) == 0
     printed = capsys.readouterr().out
     assert 'model units' in printed and 'kg' not in printed and 'REFUSED' in printed
-    report = json.loads((out / 'report.json').read_text())
-    assert report['units'] == 'model' and report['scale']['method'] == 'none'
-    spec = report['gradation']['spec']
-    assert spec['verdict'] == 'REFUSED' and spec['checked'] is False and spec['passed'] is None
-    assert 'model units' in spec['reasons'][0]
-    assert all(rock['mass'] is None for rock in report['rocks'])
-    assert report['gradation']['total_mass'] is None and report['gradation']['sieves'] == []
+    report = load(Report, out / 'report.json')
+    assert report.units == 'model' and report.scale.method == 'none'
+    spec = report.gradation.spec
+    assert spec.verdict == 'REFUSED' and spec.checked is False and spec.passed is None
+    assert 'model units' in spec.reasons[0]
+    assert all(rock.mass is None for rock in report.rocks)
+    assert report.gradation.total_mass is None and report.gradation.sieves == []
     # Without scale the class does not set the smallest rock of interest either.
-    assert report['segmentation']['scale']['source'] == 'mesh'
+    assert report.segmentation.scale.source == 'mesh'
     rows = (out / 'rocks.csv').read_text().strip().splitlines()
     header = rows[0].split(',')
     first = dict(zip(header, rows[1].split(','), strict=True))
@@ -145,11 +141,11 @@ def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
     write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
     out = tmp_path / 'paper'
     assert main(['segment', str(mesh_path), '--out', str(out), '--mode', 'paper']) == 0
-    report = json.loads((out / 'report.json').read_text())
-    assert report['scale']['method'] == 'none'
-    assert report['segmentation']['threshold'] == 0.7
-    assert report['gradation']['spec']['checked'] is False
-    assert report['segmentation']['scale']['source'] == 'mesh'
+    report = load(Report, out / 'report.json')
+    assert report.scale.method == 'none'
+    assert report.segmentation.threshold == 0.7
+    assert report.gradation.spec.checked is False
+    assert report.segmentation.scale.source == 'mesh'
 
 
 def test_cli_errors_are_messages(tmp_path, capsys) -> None:
@@ -167,7 +163,9 @@ def test_partly_seen_rocks_raise_a_capture_warning() -> None:
     rocks.append(replace(base, id=5, visible_fraction=0.44))
     (text,) = visibility_warnings(rocks)
     assert text.startswith('2 of 5 rocks') and '(ids 3, 5)' in text
-    ((topic, msg),) = capture_warnings(m.RosbagsFactory(typestore()), 0, {'warnings': [text]})
+    report = make_report([], ScaleRecord())
+    report.warnings = [text]
+    ((topic, msg),) = capture_warnings(m.RosbagsFactory(typestore()), 0, report)
     assert topic == topics.DIAGNOSTICS
     assert msg.status[0].name == 'stockpile/capture' and msg.status[0].message == text
 
@@ -175,7 +173,6 @@ def test_partly_seen_rocks_raise_a_capture_warning() -> None:
 def test_a_keyframe_photo_gets_the_rocks_outlined(tmp_path) -> None:
     import cv2
 
-    from stockpile_ros.segment.pipeline import analyse_mesh
     from stockpile_ros.segment.provenance import Provenance
     from stockpile_ros.segment.render import overview_camera
     from stockpile_ros.segment.report import write_result_folder

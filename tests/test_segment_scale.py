@@ -159,9 +159,9 @@ def test_a_class_finer_than_the_mesh_is_warned_about() -> None:
     # Median edges of about 43 mm: class I's 47 mm is about one of them. The class sizes the
     # segmentation only on a metric mesh.
     metric = MeshInfo(ScaleRecord('target', 1.0, 0.01), units='m')
-    warned = analyse_mesh(v, f, spec=spec, mesh_info=metric).report['warnings']
+    warned = analyse_mesh(v, f, spec=spec, mesh_info=metric).report.warnings
     assert any('the mesh resolves' in w for w in warned)
-    assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report['warnings'])
+    assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report.warnings)
 
 
 def test_fragments_are_judged_by_area_not_by_face_count() -> None:

@@ -68,12 +68,11 @@ def _print_summary(s: ReplaySummary) -> None:
         print(f'registered {sfm.registered}/{s.keyframes} keyframes, '
               f'reprojection {sfm.mean_reprojection_error_px:.2f} px')  # fmt: skip
     if s.report is not None:
-        scale = s.report['scale']
-        rel = scale.get('rel_uncertainty')
+        scale = s.report.scale
+        rel = scale.rel_uncertainty
         unc = '' if rel is None else f' +/- {100 * rel:.1f} %'
-        metric = scale.get('method') != 'none'
-        note = '' if metric else ': every size is in model units, not metres'
-        print(f'scale: {scale.get("method")}{unc}{note}')
+        note = '' if scale.metric else ': every size is in model units, not metres'
+        print(f'scale: {scale.method}{unc}{note}')
         for line in result_lines(s.report):
             print(line)
         print(f'result: {s.result_dir}')

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..artefacts import MeshInfo, ScaleMethod, ScaleRecord, SimilarityRecord, load, to_json
+from ..artefacts import MeshInfo, ScaleMethod, ScaleRecord, SimilarityRecord, load
 from ..cloud import (
     cloud_segment_params,
     is_mesh_file,
@@ -172,31 +172,26 @@ def run(args: argparse.Namespace) -> int:
         measure_params=settings.measure,
         spec=spec, mesh_info=info, source=str(args.mesh), report_options=options,
     )  # fmt: skip
-    analysis.report['mesh']['check'] = check.as_dict()
+    report = analysis.report
+    report.mesh.check = check
     if info is not None and (info.cloud is not None or 'cloud.up' in settings.explicit):
         # How a cloud or a foreign mesh was levelled and meshed: the way back to its frame.
-        made = {
-            'cloud': info.cloud,
-            'poisson': info.poisson,
-            'model_to_stockpile': info.model_to_stockpile,
-        }
-        analysis.report['mesh'].update({k: to_json(v) for k, v in made.items() if v})
-    analysis.report['warnings'][:0] = check.warnings
+        report.mesh.cloud = info.cloud
+        report.mesh.poisson = info.poisson or None
+        report.mesh.model_to_stockpile = info.model_to_stockpile
+    report.warnings[:0] = check.warnings
     provenance = Provenance.for_input(args.mesh, settings.values, defaults())
     keyframes = args.mesh.resolve().parent.parent / 'keyframes'
     write_result_folder(args.out, analysis, provenance, options, keyframes)
     write_effective(settings, args.out)
-    g = analysis.report['gradation']
-    metric = analysis.report['units'] != 'model'
-    unit = 'm' if metric else 'model units'
-    d50 = 'undefined' if g['d50'] is None else f'{g["d50"]:.3f} {unit}'
-    mass = f', total mass {g["total_mass"]:.1f} kg' if metric else ''
+    g = report.gradation
+    unit = 'm' if report.metric else 'model units'
+    d50 = 'undefined' if g.d50 is None else f'{g.d50:.3f} {unit}'
+    mass = f', total mass {g.total_mass:.1f} kg' if g.total_mass is not None else ''
     print(f'{len(analysis.rocks)} rocks, D50 {d50}{mass} -> {args.out}')
-    if g['spec']['class'] is not None:
-        reasons = '; '.join(g['spec']['reasons'])
-        print(
-            f'class {g["spec"]["class"]}: {g["spec"]["verdict"]}{": " if reasons else ""}{reasons}'
-        )
-    for text in analysis.report['warnings']:
+    if g.spec.class_name is not None:
+        reasons = '; '.join(g.spec.reasons)
+        print(f'class {g.spec.class_name}: {g.spec.verdict}{": " if reasons else ""}{reasons}')
+    for text in report.warnings:
         print(f'stockpile segment: warning: {text}', file=sys.stderr)
     return 0

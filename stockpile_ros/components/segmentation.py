@@ -14,6 +14,7 @@ from typing import Any
 
 from ..artefacts import WorkFolder
 from ..recon.collector import CollectorState
+from ..result import Report
 from ..ros.messages import MessageFactory
 from ..ros.publications import (
     Publication,
@@ -31,28 +32,28 @@ from .reconstruction import Emit
 __all__ = ['SegmentationComponent', 'result_lines', 'verdict']
 
 
-def result_lines(report: dict[str, Any]) -> list[str]:
+def result_lines(report: Report) -> list[str]:
     """Return what a run found, for people: rocks and D50, then the class and its verdict.
 
     Sizes are in metres only when the run had a metric scale (``units`` is ``model`` else);
     the verdict is PASS, FAIL (with the reasons), UNDECIDED (an interval straddles a limit) or
     REFUSED (no metric scale).
     """
-    g = report['gradation']
-    unit = 'model units' if report.get('units') == 'model' else 'm'
-    d50 = 'undefined' if g.get('d50') is None else f'{g["d50"]:.3f} {unit}'
-    lines = [f'{len(report["rocks"])} rocks, D50 {d50}']
-    spec = g.get('spec') or {}
-    if spec.get('class'):
-        why = '; '.join(spec.get('reasons', []))
-        said = spec.get('verdict', 'NOT CHECKED')
+    g = report.gradation
+    unit = 'm' if report.metric else 'model units'
+    d50 = 'undefined' if g.d50 is None else f'{g.d50:.3f} {unit}'
+    lines = [f'{len(report.rocks)} rocks, D50 {d50}']
+    spec = g.spec
+    if spec.class_name:
+        why = '; '.join(spec.reasons)
+        said = spec.verdict
         lines.append(
-            f'class {spec["class"]}: {said}' + (f': {why}' if why and said != 'PASS' else '')
+            f'class {spec.class_name}: {said}' + (f': {why}' if why and said != 'PASS' else '')
         )
     return lines
 
 
-def verdict(report: dict[str, Any]) -> str:
+def verdict(report: Report) -> str:
     """Return the results in one line (the final status's message)."""
     return '; '.join(result_lines(report))
 
@@ -119,11 +120,11 @@ class SegmentationComponent:
         max_faces = int(settings.values['display_max_faces'])
         emit(segmentation_outputs(f, stamp_ns, outcome.analysis, settings.frame_id, max_faces))
         emit(capture_warnings(f, stamp_ns, report))
-        rocks = len(report['rocks'])
+        rocks = len(report.rocks)
         emit([
             diagnostics(f, stamp_ns, 'segment', 'OK', f'{rocks} rocks',
                         {'rocks': rocks, 'seconds': round(outcome.seconds['segment'], 2),
-                         'd50': report['gradation'].get('d50')}),
+                         'd50': report.gradation.d50}),
             status(f, stamp_ns, 'DONE', 'segment', held, verdict(report)),
         ])  # fmt: skip
         return outcome

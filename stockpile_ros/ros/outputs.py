@@ -3,8 +3,8 @@
 Standard types: ``sensor_msgs/PointCloud2`` (x, y, z, rgb, label),
 ``visualization_msgs/MarkerArray`` (one coloured shape and one size label per rock) and
 ``diagnostic_msgs/DiagnosticArray``. Our types
-(``stockpile_msgs``) are built from the ``report.json`` dictionaries of ``docs/formats.md``: JSON
-``null`` becomes NaN in float fields.
+(``stockpile_msgs``) are built from the report's records (:mod:`stockpile_ros.result`): an
+undefined number (None) becomes NaN in float fields.
 
 Each builder takes a :class:`~stockpile_ros.ros.messages.MessageFactory` first, as in
 :mod:`stockpile_ros.ros.messages`.
@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..artefacts import ScaleRecord
+from ..result import GradationRecord, RockRecord
 from .messages import MessageFactory, header, pose
 
 __all__ = [
@@ -51,8 +53,8 @@ _UINT32 = 6
 _IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 
 
-def _nan(value: Any) -> float:
-    """JSON number or null -> float (NaN for null)."""
+def _nan(value: float | None) -> float:
+    """Return the number, NaN for None."""
     return math.nan if value is None else float(value)
 
 
@@ -243,7 +245,7 @@ def _marker(
 
 def marker_array(
     f: MessageFactory,
-    rocks: Sequence[Mapping[str, Any]],
+    rocks: Sequence[RockRecord],
     stamp_ns: int,
     frame_id: str,
     vertices: npt.ArrayLike | None = None,
@@ -255,12 +257,12 @@ def marker_array(
     The array starts with a DELETEALL marker (clears the previous result in RViz). Then, per rock
     (``rock_color`` colours): namespace ``rocks``, id = rock id, a TRIANGLE_LIST of the rock's faces
     when the labelled mesh is given, else a CUBE at the centroid with the principal-axes orientation
-    (``orientation_xyzw`` when the dict has it, identity otherwise) and edges a, b, c; namespace
-    ``rock_labels``, id = rock id, a TEXT_VIEW_FACING above the rock: ``"<id>: b <b> cm"``.
+    (``orientation_xyzw``) and edges a, b, c; namespace ``rock_labels``, id = rock id, a
+    TEXT_VIEW_FACING above the rock: ``"<id>: b <b> cm"``.
 
     Args:
         f: Message factory.
-        rocks: Rock dicts of ``report.json`` (``id``, ``centroid``, ``a``, ``b``, ``c`` at least).
+        rocks: The report's rocks.
         stamp_ns: Header stamp [ns].
         frame_id: Header frame (the frame of the centroids and mesh).
         vertices: Vx3 mesh vertices, optional.
@@ -268,7 +270,7 @@ def marker_array(
         face_labels: F rock ids per face (0 = ground), optional.
 
     Raises:
-        ValueError: A rock dict lacks a key, or only part of the mesh is given.
+        ValueError: Only part of the mesh is given.
 
     """
     hdr = header(f, stamp_ns, frame_id)
@@ -285,11 +287,10 @@ def marker_array(
     point_cls = f.cls('geometry_msgs/msg/Point')
     markers = [_marker(f, hdr, '', 0, 'CUBE', 'DELETEALL')]
     for rock in rocks:
-        what = f'rock {rock.get("id", "?")}'
-        rock_id = int(_get(rock, 'id', what))
-        centroid = [float(v) for v in _get(rock, 'centroid', what)]
-        a, b, c = (_nan(_get(rock, k, what)) for k in ('a', 'b', 'c'))
-        quat = [float(v) for v in rock.get('orientation_xyzw') or _IDENTITY_XYZW]
+        rock_id = rock.id
+        centroid = [float(v) for v in rock.centroid]
+        a, b, c = rock.a, rock.b, rock.c
+        quat = [float(v) for v in rock.orientation_xyzw]
         red, green, blue = rock_color(rock_id)
         corners = None
         if verts is not None and tri is not None and lab is not None:
@@ -433,105 +434,84 @@ def diagnostic_array(
     )
 
 
-def rock_msg(f: MessageFactory, rock: Mapping[str, Any], stamp_ns: int, frame_id: str) -> Any:
-    """Build ``stockpile_msgs/Rock`` from a ``report.json`` rock dict.
+def rock_msg(f: MessageFactory, rock: RockRecord, stamp_ns: int, frame_id: str) -> Any:
+    """Build ``stockpile_msgs/Rock`` from a report's rock.
 
-    ``fer`` fills ``flat_elongated_ratio``; ``orientation_xyzw`` is used when present, identity
-    otherwise; null numbers become NaN.
-
-    Raises:
-        ValueError: A required key is missing.
-
+    ``fer`` fills ``flat_elongated_ratio``; a mass of None (no metric scale) becomes NaN.
     """
-    what = f'rock {rock.get("id", "?")}'
-    x, y, z = (float(v) for v in _get(rock, 'centroid', what))
-    qx, qy, qz, qw = (float(v) for v in rock.get('orientation_xyzw') or _IDENTITY_XYZW)
-    number = {
-        key: _nan(_get(rock, src, what))
-        for key, src in (
-            ('a', 'a'),
-            ('b', 'b'),
-            ('c', 'c'),
-            ('esd', 'esd'),
-            ('volume', 'volume'),
-            ('mass', 'mass'),
-            ('visible_area', 'visible_area'),
-            ('visible_fraction', 'visible_fraction'),
-            ('flat_elongated_ratio', 'fer'),
-            ('sphericity', 'sphericity'),
-            ('confidence', 'confidence'),
-        )
-    }
+    x, y, z = (float(v) for v in rock.centroid)
+    qx, qy, qz, qw = (float(v) for v in rock.orientation_xyzw)
     return f.cls('stockpile_msgs/msg/Rock')(
         header=header(f, stamp_ns, frame_id),
-        id=int(_get(rock, 'id', what)),
+        id=rock.id,
         centroid=f.cls('geometry_msgs/msg/Point')(x=x, y=y, z=z),
         orientation=f.cls('geometry_msgs/msg/Quaternion')(x=qx, y=qy, z=qz, w=qw),
-        **number,
+        a=rock.a,
+        b=rock.b,
+        c=rock.c,
+        esd=rock.esd,
+        volume=rock.volume,
+        mass=_nan(rock.mass),
+        visible_area=rock.visible_area,
+        visible_fraction=rock.visible_fraction,
+        flat_elongated_ratio=rock.fer,
+        sphericity=rock.sphericity,
+        confidence=rock.confidence,
     )
 
 
 def rock_array(
     f: MessageFactory,
-    rocks: Sequence[Mapping[str, Any]],
-    scale: Mapping[str, Any],
+    rocks: Sequence[RockRecord],
+    scale: ScaleRecord,
     stamp_ns: int,
     frame_id: str,
 ) -> Any:
-    """Build ``stockpile_msgs/RockArray`` from ``report.json``'s ``rocks`` and ``scale``.
+    """Build ``stockpile_msgs/RockArray`` from the report's rocks and scale.
 
-    ``metric`` is false when the scale method is ``"none"``; a null ``rel_uncertainty`` becomes NaN.
-
-    Raises:
-        ValueError: A required key is missing.
-
+    ``metric`` is false when the scale method is ``"none"``; an unknown ``rel_uncertainty``
+    becomes NaN.
     """
-    method = str(_get(scale, 'method', 'scale'))
     return f.cls('stockpile_msgs/msg/RockArray')(
         header=header(f, stamp_ns, frame_id),
         rocks=[rock_msg(f, rock, stamp_ns, frame_id) for rock in rocks],
-        metric=method != 'none',
-        scale_method=method,
-        scale_rel_uncertainty=_nan(scale.get('rel_uncertainty')),
+        metric=scale.metric,
+        scale_method=scale.method,
+        scale_rel_uncertainty=_nan(scale.rel_uncertainty),
     )
 
 
 def gradation_msg(
     f: MessageFactory,
-    gradation: Mapping[str, Any],
+    gradation: GradationRecord,
     stamp_ns: int,
     frame_id: str,
     units: str = 'm',
 ) -> Any:
-    """Build ``stockpile_msgs/Gradation`` from ``report.json``'s ``gradation`` dict.
+    """Build ``stockpile_msgs/Gradation`` from the report's gradation.
 
-    Null sizes become NaN; a missing or null ``spec`` gives an empty class, not checked, not
-    passed, no verdict. ``units`` is the report's (``m``, or ``model`` without a metric scale).
-
-    Raises:
-        ValueError: A required key is missing.
-
+    Undefined sizes become NaN; without a class the class is empty, not checked, not passed
+    (``verdict`` NOT CHECKED). ``units`` is the report's (``m``, or ``model`` without a metric
+    scale).
     """
-    what = 'gradation'
-    spec = gradation.get('spec') or {}
-    numbers = {
-        key: _nan(_get(gradation, key, what))
-        for key in ('d10', 'd15', 'd30', 'd50', 'd60', 'd85', 'd100', 'cu', 'cc', 'total_mass')
-    }
+    spec = gradation.spec
     return f.cls('stockpile_msgs/msg/Gradation')(
         header=header(f, stamp_ns, frame_id),
-        size_measure=str(_get(gradation, 'size_measure', what)),
-        sizes=f.f64(_get(gradation, 'sizes', what)),
-        percent_passing_count=f.f64(_get(gradation, 'percent_passing_count', what)),
-        percent_passing_mass=f.f64(_get(gradation, 'percent_passing_mass', what)),
-        rock_count=int(_get(gradation, 'rock_count', what)),
-        spec_class=str(spec.get('class') or ''),
-        checked=bool(spec.get('checked', False)),
-        passed=bool(spec.get('passed') or False),
-        verdict=str(spec.get('verdict') or ''),
-        reasons=[str(r) for r in spec.get('reasons', [])],
-        units=str(units),
-        **numbers,
+        size_measure=gradation.size_measure,
+        sizes=f.f64(gradation.sizes),
+        percent_passing_count=f.f64(gradation.percent_passing_count),
+        percent_passing_mass=f.f64(gradation.percent_passing_mass),
+        rock_count=gradation.rock_count,
+        spec_class=spec.class_name or '',
+        checked=spec.checked,
+        passed=bool(spec.passed),
+        verdict=spec.verdict,
+        reasons=list(spec.reasons),
+        units=units,
+        **{key: _nan(value) for key, value in gradation.characteristic.items()},
+        cu=_nan(gradation.cu),
+        cc=_nan(gradation.cc),
+        total_mass=_nan(gradation.total_mass),
     )
 
 

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from ..artefacts import DenseSummary, MeshInfo, SparseSummary, WorkFolder, load
 from ..recon.collector import CollectorState
 from ..recon.scaling import odom_from_stockpile
+from ..result import Report
 from ..runner import Outcome
 from ..segment.pipeline import Analysis
 from . import topics
@@ -107,9 +108,9 @@ def diagnostics(
     return topics.DIAGNOSTICS, diagnostic_array(f, stamp_ns, [entry])
 
 
-def capture_warnings(f: MessageFactory, stamp_ns: int, report: dict[str, Any]) -> list[Publication]:
+def capture_warnings(f: MessageFactory, stamp_ns: int, report: Report) -> list[Publication]:
     """One ``stockpile/capture`` WARN diagnostic per warning of a report."""
-    return [diagnostics(f, stamp_ns, 'capture', 'WARN', t) for t in report.get('warnings', [])]
+    return [diagnostics(f, stamp_ns, 'capture', 'WARN', t) for t in report.warnings]
 
 
 def _stage_values(
@@ -241,12 +242,11 @@ def segmentation_outputs(
             'faces': analysis.faces,
             'face_labels': labels,
         }
-    rocks = report['rocks']
+    rocks = report.rocks
     return [
         (topics.SEGMENTED_CLOUD,
          pointcloud2(f, centroids, colors, labels, stamp_ns, frame_id)),
         (topics.ROCK_MARKERS, marker_array(f, rocks, stamp_ns, frame_id, **mesh_args)),
-        (topics.ROCKS, rock_array(f, rocks, report['scale'], stamp_ns, frame_id)),
-        (topics.GRADATION, gradation_msg(f, report['gradation'], stamp_ns, frame_id,
-                                         str(report.get('units', 'm')))),
+        (topics.ROCKS, rock_array(f, rocks, report.scale, stamp_ns, frame_id)),
+        (topics.GRADATION, gradation_msg(f, report.gradation, stamp_ns, frame_id, report.units)),
     ]  # fmt: skip

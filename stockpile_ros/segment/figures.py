@@ -13,7 +13,7 @@ from __future__ import annotations
 import io
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..artefacts import KeyframePose
+from ..result import GradationRecord, RockRecord
 from .measure import PARTLY_SEEN
 from .qa import LENGTH_UNITS
 from .render import Pinhole, label_colours, overview_camera, raycast_labels
@@ -66,17 +68,17 @@ def _png_bytes(fig: Any) -> bytes:
     return buf.getvalue()
 
 
-def _label_rocks(ax: Any, seen: npt.NDArray[np.int64], rocks: list[Mapping[str, Any]]) -> None:
+def _label_rocks(ax: Any, seen: npt.NDArray[np.int64], rocks: Sequence[RockRecord]) -> None:
     """Write each rock's id at the median pixel of its footprint (rocks not in view get none)."""
     for rock in rocks:
-        ys, xs = np.nonzero(seen == rock['id'])
+        ys, xs = np.nonzero(seen == rock.id)
         if len(xs) < 4:
             continue
-        low = rock['visible_fraction'] < PARTLY_SEEN
+        low = rock.visible_fraction < PARTLY_SEEN
         ax.text(
             float(np.median(xs)),
             float(np.median(ys)),
-            f'{rock["id"]}{"!" if low else ""}',
+            f'{rock.id}{"!" if low else ""}',
             ha='center',
             va='center',
             fontsize=9,
@@ -149,7 +151,7 @@ def render_png(
     vertices: npt.NDArray[np.float64],
     faces: npt.NDArray[np.int64],
     labels: npt.NDArray[np.integer[Any]],
-    rocks: list[Mapping[str, Any]],
+    rocks: Sequence[RockRecord],
     unit: str | None,
 ) -> bytes:
     """Draw the pile from above-front: one colour per rock, ids, low-visibility marks, scale bar.
@@ -158,7 +160,7 @@ def render_png(
         vertices: Mesh vertices [m, or model units].
         faces: Triangles.
         labels: Face labels.
-        rocks: Rock dicts of report.json.
+        rocks: The report's rocks.
         unit: Display length unit of the scale bar; None (no metric scale): no bar.
 
     """
@@ -170,7 +172,7 @@ def render_png(
     ok = seen >= 0
     colours = label_colours(int(labels.max()) + 1 if len(labels) else 1)
     image[ok] = np.clip(colours[seen[ok]] * (0.3 + 0.7 * shade[ok])[:, None], 0, 255)
-    low = {int(r['id']) for r in rocks if r['visible_fraction'] < PARTLY_SEEN}
+    low = {r.id for r in rocks if r.visible_fraction < PARTLY_SEEN}
     image[_outlines(seen, low)] = (255, 127, 14)
     bar = _scale_bar(cam, vertices[on_rocks], unit) if unit is not None and len(on_rocks) else None
     keep = seen > 0
@@ -180,7 +182,7 @@ def render_png(
     x0, x1, y0, y1 = _crop(keep, cam.width, cam.height)
     fig, ax = _figure(x1 - x0, y1 - y0)
     ax.imshow(image)
-    _label_rocks(ax, seen, list(rocks))
+    _label_rocks(ax, seen, rocks)
     if bar is not None and unit is not None:
         _draw_bar(ax, bar[0], bar[1], unit)
     else:
@@ -199,14 +201,14 @@ def _quat_matrix(q: list[float]) -> npt.NDArray[np.float64]:
 
 def find_keyframe(
     keyframes_dir: Path | None,
-    poses: list[Mapping[str, Any]],
+    poses: Sequence[KeyframePose],
     centroids: npt.ArrayLike,
 ) -> tuple[KeyframeView | None, str]:
     """Pick the keyframe that sees the most rock centroids, or return None and why there is none.
 
     Args:
         keyframes_dir: The work folder's ``keyframes/`` (``keyframes.jsonl`` and PNGs), or None.
-        poses: ``report['keyframes']``: stamp and camera-to-stockpile pose of each keyframe used.
+        poses: The report's keyframes: stamp and camera-to-stockpile pose of each one used.
         centroids: Rock centroids in the stockpile frame.
 
     """
@@ -223,7 +225,7 @@ def find_keyframe(
     best: tuple[tuple[int, float], KeyframeView] | None = None
     pts = np.asarray(centroids, dtype=np.float64).reshape(-1, 3)
     for pose in poses:
-        entry = by_stamp.get(int(pose['stamp_ns']))
+        entry = by_stamp.get(pose.stamp_ns)
         if (
             entry is None
             or not entry.get('camera')
@@ -233,8 +235,8 @@ def find_keyframe(
         cam = entry['camera']
         camera = Pinhole(
             np.asarray(cam['k'], dtype=np.float64).reshape(3, 3),
-            _quat_matrix(list(pose['orientation_xyzw'])),
-            np.asarray(pose['position'], dtype=np.float64),
+            _quat_matrix(pose.orientation_xyzw),
+            np.asarray(pose.position, dtype=np.float64),
             int(cam['width']),
             int(cam['height']),
         )
@@ -244,7 +246,7 @@ def find_keyframe(
         view = KeyframeView(
             keyframes_dir / entry['file'],
             camera,
-            int(pose['stamp_ns']),
+            pose.stamp_ns,
             tuple(float(x) for x in cam.get('d') or ()),
         )
         # Most rocks in frame first; then the nearest camera, where the rocks look largest.
@@ -262,7 +264,7 @@ def keyframe_png(
     vertices: npt.NDArray[np.float64],
     faces: npt.NDArray[np.int64],
     labels: npt.NDArray[np.integer[Any]],
-    rocks: list[Mapping[str, Any]],
+    rocks: Sequence[RockRecord],
 ) -> bytes:
     """Draw each rock's visible outline and id on the keyframe photo (ray-cast from its camera)."""
     import cv2
@@ -277,10 +279,8 @@ def keyframe_png(
     if any(abs(x) > 0 for x in view.distortion):
         photo = cv2.undistort(photo, cam.k, np.asarray(view.distortion, dtype=np.float64))
     seen, _ = raycast_labels(vertices, faces, labels, cam)
-    ids = {int(r['id']) for r in rocks}
-    low = {
-        i for i in ids if any(r['id'] == i and r['visible_fraction'] < PARTLY_SEEN for r in rocks)
-    }
+    ids = {r.id for r in rocks}
+    low = {r.id for r in rocks if r.visible_fraction < PARTLY_SEEN}
     image = photo.copy()
     image[_outlines(seen, ids - low)] = (255, 255, 255)
     image[_outlines(seen, low)] = (255, 127, 14)
@@ -288,7 +288,7 @@ def keyframe_png(
     zoom = max(1.0, 900.0 / (x1 - x0))
     fig, ax = _figure(int((x1 - x0) * zoom), int((y1 - y0) * zoom))
     ax.imshow(image)
-    _label_rocks(ax, seen, list(rocks))
+    _label_rocks(ax, seen, rocks)
     ax.set_xlim(x0 - 0.5, x1 - 0.5)
     ax.set_ylim(y1 - 0.5, y0 - 0.5)
     return _png_bytes(fig)
@@ -308,11 +308,11 @@ def _crop(mask: npt.NDArray[np.bool_], width: int, height: int) -> tuple[int, in
     return x0, int(x0 + 2 * half_w), y0, int(y0 + 2 * half_h)
 
 
-def gradation_png(report: Mapping[str, Any], unit: str | None) -> bytes:
+def gradation_png(grad: GradationRecord, unit: str | None) -> bytes:
     """Plot percent passing by mass and by count against size, with interval band, limits, fit.
 
     Args:
-        report: The report.json dict.
+        grad: The report's gradation.
         unit: Display length unit; None for model units.
 
     """
@@ -321,59 +321,56 @@ def gradation_png(report: Mapping[str, Any], unit: str | None) -> bytes:
     matplotlib.use('Agg')
     from matplotlib.figure import Figure
 
-    grad = report['gradation']
-    spec = grad['spec']
+    spec = grad.spec
     factor = LENGTH_UNITS[unit] if unit else 1.0
     label = unit or 'model units'
     fig = Figure(figsize=(7.5, 4.6), dpi=110)
     ax = fig.add_subplot(1, 1, 1)
-    sizes = np.asarray(grad['sizes'], dtype=np.float64) / factor
-    band = grad.get('intervals', {}).get('mass', {})
-    pcts = [p for p in (10, 15, 30, 50, 60, 85, 100) if band.get(f'd{p}', [None])[0] is not None]
-    if pcts:
-        lo = [band[f'd{p}'][0] / factor for p in pcts]
-        hi = [band[f'd{p}'][1] / factor for p in pcts]
-        conf = grad['intervals']['confidence']
+    sizes = np.asarray(grad.sizes, dtype=np.float64) / factor
+    band = [
+        (int(key[1:]), lo, hi)
+        for key, (lo, hi) in grad.intervals.mass.items()
+        if lo is not None and hi is not None
+    ]
+    if band:
         ax.fill_betweenx(
-            pcts,
-            lo,
-            hi,
+            [pct for pct, _, _ in band],
+            [lo / factor for _, lo, _ in band],
+            [hi / factor for _, _, hi in band],
             color='tab:blue',
             alpha=0.18,
             lw=0,
-            label=f'{conf:.0%} interval of D (bootstrap + scale)',
+            label=f'{grad.intervals.confidence:.0%} interval of D (bootstrap + scale)',
         )
     if len(sizes):
-        ax.plot(sizes, grad['percent_passing_mass'], 'o-', color='tab:blue', ms=4, label='by mass')
-        ax.plot(
-            sizes, grad['percent_passing_count'], 's--', color='tab:gray', ms=3, label='by count'
-        )
+        ax.plot(sizes, grad.percent_passing_mass, 'o-', color='tab:blue', ms=4, label='by mass')
+        ax.plot(sizes, grad.percent_passing_count, 's--', color='tab:gray', ms=3, label='by count')
         ax.set_xscale('log')
-    fit = grad.get('rosin_rammler')
+    fit = grad.rosin_rammler
     if fit and len(sizes):
         xs = np.geomspace(sizes[0] * 0.8, sizes[-1] * 1.1, 100)
         ax.plot(
             xs,
-            100 * (1 - np.exp(-((xs * factor / fit['d_c']) ** fit['n']))),
+            100 * (1 - np.exp(-((xs * factor / fit.d_c) ** fit.n))),
             ':',
             color='tab:green',
-            label=f'Rosin-Rammler d_c {fit["d_c"] / factor:.3g} {label}, n {fit["n"]:.2f}',
+            label=f'Rosin-Rammler d_c {fit.d_c / factor:.3g} {label}, n {fit.n:.2f}',
         )
-    for row in spec.get('limits', []):
-        pct = int(row['key'][1:])
-        ends = [x / factor for x in (row['min'], row['max']) if x is not None]
-        colour = {'pass': 'tab:green', 'fail': 'tab:red'}.get(row['status'], _LOW)
+    for row in spec.limits:
+        pct = int(row.key[1:])
+        ends = [x / factor for x in (row.min, row.max) if x is not None]
+        colour = {'pass': 'tab:green', 'fail': 'tab:red'}.get(row.status, _LOW)
         ax.plot(ends, [pct] * len(ends), '|-', color=colour, lw=2, ms=14)
-    if spec.get('limits'):
+    if spec.limits:
         ax.plot(
             [],
             [],
             '|-',
             color='tab:red',
-            label=f'class {spec["class"]} limits ({spec["basis"]}; green pass, orange '
+            label=f'class {spec.class_name} limits ({spec.basis}; green pass, orange '
             'undecided, red fail)',
         )
-    ax.set_xlabel(f'size {grad.get("size_measure", "b")} [{label}]')
+    ax.set_xlabel(f'size {grad.size_measure} [{label}]')
     ax.set_ylabel('percent passing [%]')
     ax.set_ylim(0, 102)
     ax.grid(True, which='both', alpha=0.3)

@@ -1,6 +1,7 @@
-"""Gradation of a pile from per-rock sizes and masses, and its check against a riprap class table.
+"""Gradation of a pile from per-rock sizes and masses, and the riprap class tables.
 
 Usable on its own (for instance on the simulator's truth): :func:`gradation` takes plain arrays.
+The check against a class, with intervals, is :func:`~.qa.decide`'s.
 
 Percent passing at size ``s`` is the share (by count, or by mass) of rocks whose size is at most
 ``s``, evaluated at every rock's size. Characteristic sizes ``D_p`` are read off the mass curve by
@@ -13,7 +14,6 @@ mass), since the sample says nothing about smaller sizes. ``D100`` is the larges
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +22,9 @@ import numpy.typing as npt
 import yaml
 
 from ..errors import StockpileError
+from ..result import GradationCurve
 
-__all__ = ['PERCENTS', 'check_class', 'gradation', 'load_class_table', 'percent_size']
+__all__ = ['PERCENTS', 'gradation', 'load_class_table', 'percent_size']
 
 #: The characteristic sizes reported, as percent passing by mass.
 PERCENTS = (10, 15, 30, 50, 60, 85, 100)
@@ -61,22 +62,14 @@ def _none_if_nan(x: float | None) -> float | None:
 
 
 def gradation(
-    sizes: npt.ArrayLike,
-    masses: npt.ArrayLike,
-    size_measure: str = 'b',
-    spec: Mapping[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Gradation dict with the keys of report.json (docs/formats.md).
+    sizes: npt.ArrayLike, masses: npt.ArrayLike, size_measure: str = 'b'
+) -> GradationCurve:
+    """Return the gradation curve of a set of rocks (docs/formats.md).
 
     Args:
         sizes: Size of each rock [m] (``size_measure``, normally the intermediate dimension b).
         masses: Mass of each rock [kg].
-        size_measure: Name of the size used, recorded in the dict.
-        spec: A class entry of the class table (see :func:`load_class_table`), or None for no check.
-
-    Returns:
-        ``size_measure, sizes, percent_passing_count, percent_passing_mass, d10 ... d100, cu, cc,
-        rock_count, total_mass, spec``.
+        size_measure: Name of the size used, recorded in the curve.
 
     """
     s = np.asarray(sizes, dtype=np.float64).ravel()
@@ -93,23 +86,25 @@ def gradation(
     last = np.searchsorted(s, s, side='right') - 1
     by_count = 100.0 * (last + 1) / n if n else np.zeros(0)
     by_mass = 100.0 * np.cumsum(m)[last] / total if total > 0 else np.zeros(n)
-    result: dict[str, Any] = {
-        'size_measure': size_measure,
-        'sizes': s.tolist(),
-        'percent_passing_count': np.asarray(by_count).tolist(),
-        'percent_passing_mass': np.asarray(by_mass).tolist(),
-    }
-    ds: dict[int, float | None] = {}
-    for pct in PERCENTS:
-        ds[pct] = percent_size(s, by_mass, pct) if total > 0 else None
-        result[f'd{pct}'] = ds[pct]
+    ds = {pct: percent_size(s, by_mass, pct) if total > 0 else None for pct in PERCENTS}
     d10, d30, d60 = ds[10], ds[30], ds[60]
-    result['cu'] = _none_if_nan(d60 / d10) if d10 and d60 else None
-    result['cc'] = _none_if_nan(d30 * d30 / (d10 * d60)) if d10 and d30 and d60 else None
-    result['rock_count'] = n
-    result['total_mass'] = total
-    result['spec'] = check_class(result, spec)
-    return result
+    return GradationCurve(
+        size_measure=size_measure,
+        sizes=s.tolist(),
+        percent_passing_count=np.asarray(by_count).tolist(),
+        percent_passing_mass=np.asarray(by_mass).tolist(),
+        d10=d10,
+        d15=ds[15],
+        d30=d30,
+        d50=ds[50],
+        d60=d60,
+        d85=ds[85],
+        d100=ds[100],
+        cu=_none_if_nan(d60 / d10) if d10 and d60 else None,
+        cc=_none_if_nan(d30 * d30 / (d10 * d60)) if d10 and d30 and d60 else None,
+        rock_count=n,
+        total_mass=total,
+    )
 
 
 def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
@@ -160,49 +155,4 @@ def load_class_table(path: str | Path | None = None) -> dict[str, Any]:
         'basis': basis,
         'size_measure': data.get('size_measure', 'b'),
         'classes': classes,
-    }
-
-
-def check_class(grad: Mapping[str, Any], spec: Mapping[str, Any] | None) -> dict[str, Any]:
-    """Check a gradation against one class entry: pass when every limit holds.
-
-    Args:
-        grad: A gradation dict (needs the ``d..`` keys, and ``sizes`` and
-            ``percent_passing_count`` for a class by count).
-        spec: ``{"name", "basis", "limits": {"d50": [min, max], ...}}`` in metres, ``None`` for an
-            open end; ``basis`` is ``"mass"`` (the default: the ``d..`` keys) or ``"count"``
-            (characteristic sizes read off the curve by count).
-
-    Returns:
-        ``{"class", "basis", "checked", "passed", "reasons"}`` as in report.json.
-
-    """
-    if spec is None:
-        return {'class': None, 'basis': None, 'checked': False, 'passed': None, 'reasons': []}
-    basis = spec.get('basis', 'mass')
-    reasons: list[str] = []
-    for key, (lo, hi) in spec['limits'].items():
-        if basis == 'count':
-            value = percent_size(grad['sizes'], grad['percent_passing_count'], float(key[1:]))
-        else:
-            value = grad.get(key)
-        label = f'{key.upper()} by {basis}'
-        if value is None:
-            why = (
-                'too few rocks'
-                if basis == 'count'
-                else 'too few rocks, or the smallest holds too much mass'
-            )
-            reasons.append(f'{label} undefined ({why})')
-            continue
-        if lo is not None and value < lo:
-            reasons.append(f'{label} = {value:.3f} m below the minimum {lo:.3f} m')
-        if hi is not None and value > hi:
-            reasons.append(f'{label} = {value:.3f} m above the maximum {hi:.3f} m')
-    return {
-        'class': spec['name'],
-        'basis': basis,
-        'checked': True,
-        'passed': not reasons,
-        'reasons': reasons,
     }

@@ -108,7 +108,25 @@ class MeasureParams:
 
 @dataclass(frozen=True)
 class RockMeasure:
-    """One rock; field names and units as in report.json (docs/formats.md)."""
+    """One rock; names and units as in report.json (:class:`~stockpile_ros.result.RockRecord`).
+
+    Attributes:
+        id: Rock id (its label).
+        centroid: Centroid of the completed shape [m].
+        a: Longest dimension of the visible surface [m].
+        b: Intermediate dimension [m].
+        c: Shortest dimension [m].
+        esd: Equivalent sphere diameter of the completed shape [m].
+        volume: Volume of the completed shape [m^3].
+        mass: Volume x specific gravity x water density [kg].
+        visible_area: Area of the visible surface [m^2].
+        visible_fraction: Visible area over the completed shape's area.
+        fer: ``a / c``.
+        sphericity: Wadell's sphericity of the completed shape.
+        confidence: In [0, 1], see the module documentation.
+        faces: Faces of the rock's segment.
+
+    """
 
     id: int
     centroid: tuple[float, float, float]
@@ -124,24 +142,6 @@ class RockMeasure:
     sphericity: float
     confidence: float
     faces: int
-
-    def as_dict(self) -> dict[str, Any]:
-        """Return the report.json rock entry, keys exactly as docs/formats.md."""
-        return {
-            'id': self.id,
-            'centroid': list(self.centroid),
-            'a': self.a,
-            'b': self.b,
-            'c': self.c,
-            'esd': self.esd,
-            'volume': self.volume,
-            'mass': self.mass,
-            'visible_area': self.visible_area,
-            'visible_fraction': self.visible_fraction,
-            'fer': self.fer,
-            'sphericity': self.sphericity,
-            'confidence': self.confidence,
-        }
 
 
 def _mirror_height(points: F64, rim: F64, bins: int) -> float:

@@ -255,7 +255,7 @@ def class_min_rock_b(spec: Mapping[str, Any]) -> float | None:
     """Smallest rock of interest for checking a class: half its smallest lower size limit.
 
     Args:
-        spec: A class entry of the class table (``limits`` in metres, see ``check_class``).
+        spec: A class entry of the class table (``limits`` in metres, see ``load_class_table``).
 
     Returns:
         ``CLASS_MIN_SHARE`` times the smallest lower limit [m], None when the class has none.

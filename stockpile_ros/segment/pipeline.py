@@ -1,8 +1,8 @@
-"""From a stockpile mesh to the report dict: segment, measure every rock, grade the pile."""
+"""From a stockpile mesh to the report: segment, measure every rock, grade the pile."""
 
 from __future__ import annotations
 
-import math
+import copy
 import time
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -12,16 +12,22 @@ import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.transform import Rotation
 
-from ..artefacts import MeshInfo, to_json
+from ..artefacts import MeshInfo
+from ..result import (
+    GradationRecord,
+    MeasureRecord,
+    MeshRecord,
+    Report,
+    RockRecord,
+    SegmentationRecord,
+)
 from .gradation import gradation
 from .measure import MeasureParams, RockMeasure, measure_rocks, solid_axes, visibility_warnings
 from .params import SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
-__all__ = ['REPORT_SCHEMA', 'Analysis', 'analyse_mesh', 'json_safe', 'principal_axes']
-
-REPORT_SCHEMA = 'stockpile-report/2'
+__all__ = ['Analysis', 'analyse_mesh', 'grade', 'principal_axes']
 
 
 @dataclass(frozen=True)
@@ -29,12 +35,12 @@ class Analysis:
     """Everything one run produced.
 
     Attributes:
-        vertices: Nx3 mesh vertices [m] in ``report["frame_id"]``.
+        vertices: Nx3 mesh vertices [m] in ``report.frame_id``.
         faces: Mx3 triangles.
         colors: Nx3 uint8 vertex colours, or None.
         segmentation: Labels and what they came from.
         rocks: Measured rocks (ids as in ``segmentation.labels``).
-        report: The report.json dict (docs/formats.md, schema ``stockpile-report/2``).
+        report: The report (``report.json``, docs/formats.md).
 
     """
 
@@ -43,18 +49,7 @@ class Analysis:
     colors: npt.NDArray[np.uint8] | None
     segmentation: Segmentation
     rocks: list[RockMeasure]
-    report: dict[str, Any]
-
-
-def json_safe(value: Any) -> Any:
-    """Replace NaN and infinities by None, recursively (JSON has no NaN)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
+    report: Report
 
 
 def _reconstruction_warnings(info: MeshInfo) -> list[str]:
@@ -111,6 +106,56 @@ def _resolution_warnings(seg: Segmentation) -> list[str]:
     ]
 
 
+def grade(
+    rocks: list[RockMeasure],
+    spec: dict[str, Any] | None,
+    rel_scale_uncertainty: float | None,
+    options: ReportOptions,
+    metric: bool,
+) -> GradationRecord:
+    """Grade measured rocks: the curve of b by mass, its intervals, the verdict, fit and sieves.
+
+    Args:
+        rocks: The rocks.
+        spec: A class of the class table to check, or None.
+        rel_scale_uncertainty: The scale's relative uncertainty (widens the intervals).
+        options: Intervals (resamples, confidence, seed), the fit and the sieves' unit.
+        metric: Whether sizes are metres: without a scale no class is checked (REFUSED), no
+            mass is totalled and no sieve is read.
+
+    """
+    sizes, masses = [r.b for r in rocks], [r.mass for r in rocks]
+    curve = gradation(sizes, masses, 'b')
+    intervals = bootstrap_intervals(sizes, masses, rel_scale_uncertainty, options)
+    return GradationRecord(
+        **{**asdict(curve), 'total_mass': curve.total_mass if metric else None},
+        spec=decide(curve, spec, intervals) if metric else refuse(spec),
+        intervals=intervals,
+        rosin_rammler=rosin_rammler(curve) if options.rosin_rammler else None,
+        sieves=sieve_table(curve, options.length_unit) if metric else [],
+    )
+
+
+def _rock_record(rock: RockMeasure, orientation_xyzw: list[float], metric: bool) -> RockRecord:
+    return RockRecord(
+        id=rock.id,
+        centroid=list(rock.centroid),
+        orientation_xyzw=orientation_xyzw,
+        a=rock.a,
+        b=rock.b,
+        c=rock.c,
+        esd=rock.esd,
+        volume=rock.volume,
+        # Without scale a mass would be model units cubed times a density: no kilograms.
+        mass=rock.mass if metric else None,
+        visible_area=rock.visible_area,
+        visible_fraction=rock.visible_fraction,
+        fer=rock.fer,
+        sphericity=rock.sphericity,
+        confidence=rock.confidence,
+    )
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -153,48 +198,27 @@ def analyse_mesh(
     seg = segment_mesh(v, f, sp, spec if metric else None)
     t1 = time.perf_counter()
     rocks = measure_rocks(v, seg, mp)
-    sizes, masses = [r.b for r in rocks], [r.mass for r in rocks]
-    grad = gradation(sizes, masses, 'b', spec if metric else None)
-    intervals = bootstrap_intervals(sizes, masses, info.scale.rel_uncertainty, opts)
-    grad['intervals'] = intervals
-    grad['spec'] = decide(grad, spec, intervals) if metric else refuse(spec)
-    grad['rosin_rammler'] = rosin_rammler(grad) if opts.rosin_rammler else None
-    grad['sieves'] = sieve_table(grad, opts.length_unit) if metric else []
     orientation = principal_axes(v, seg, [r.id for r in rocks])
-    rock_dicts = []
-    for r in rocks:
-        entry = {**r.as_dict(), 'orientation_xyzw': orientation.get(r.id, [0.0, 0.0, 0.0, 1.0])}
-        if not metric:
-            # Without scale a mass would be model units cubed times a density: no kilograms.
-            entry['mass'] = None
-        rock_dicts.append(entry)
-    if not metric:
-        grad['total_mass'] = None
-    report: dict[str, Any] = {
-        'schema': REPORT_SCHEMA,
-        'frame_id': info.frame_id,
-        'units': 'm' if metric else 'model',
-        'scale': to_json(info.scale),
-        'keyframes': to_json(info.keyframes),
-        'rocks': rock_dicts,
-        'gradation': grad,
-        'segmentation': {
-            **sp.as_dict(),
-            'scale': seg.scale.as_dict(),
-            'raw_regions': seg.raw_regions,
-            'segments': int(seg.labels.max()) if len(seg.labels) else 0,
-            'rocks_measured': len(rocks),
-            'seconds': round(t1 - t0, 3),
-            'measure': {
-                **asdict(mp),
-                'dimensions': 'extents of the visible surface along the principal axes of inertia '
-                'of its convex hull, the outermost extent_trim of its area left out at each end',
-                'fer': 'a / c',
-            },
-        },
-        'warnings': _reconstruction_warnings(info)
+    identity = [0.0, 0.0, 0.0, 1.0]
+    report = Report(
+        frame_id=info.frame_id,
+        units='m' if metric else 'model',
+        scale=copy.deepcopy(info.scale),
+        keyframes=copy.deepcopy(info.keyframes),
+        rocks=[_rock_record(r, orientation.get(r.id, identity), metric) for r in rocks],
+        gradation=grade(rocks, spec, info.scale.rel_uncertainty, opts, metric),
+        segmentation=SegmentationRecord(
+            **asdict(sp),
+            scale=seg.scale,
+            raw_regions=seg.raw_regions,
+            segments=int(seg.labels.max()) if len(seg.labels) else 0,
+            rocks_measured=len(rocks),
+            seconds=round(t1 - t0, 3),
+            measure=MeasureRecord(**asdict(mp)),
+        ),
+        mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
+        warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
         + visibility_warnings(rocks),
-        'mesh': {'faces': len(f), 'vertices': len(v), 'source': source},
-    }
-    return Analysis(v, f, colors, seg, rocks, json_safe(report))
+    )
+    return Analysis(v, f, colors, seg, rocks, report)

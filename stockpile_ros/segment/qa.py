@@ -2,7 +2,7 @@
 
 Intervals come from a bootstrap over the rocks (``resamples`` draws of as many rocks, with
 replacement, a fixed ``seed`` so that a report can be reproduced), each draw's lengths multiplied
-by ``1 + u z`` with ``u`` the scale's relative uncertainty (``report['scale']['rel_uncertainty']``)
+by ``1 + u z`` with ``u`` the scale's relative uncertainty (``Report.scale.rel_uncertainty``)
 and ``z`` a standard normal draw: the spread of the sample and the doubt on the metric scale in
 one interval. Percent passing by mass is a ratio of masses, so a scale error moves every size by
 the same factor and leaves the curve's shape alone: Cu and Cc (ratios of sizes) carry only the
@@ -26,6 +26,17 @@ import numpy as np
 import numpy.typing as npt
 
 from ..ranges import Range
+from ..result import (
+    Basis,
+    ClassDecision,
+    GradationCurve,
+    Intervals,
+    LimitRow,
+    LimitStatus,
+    RosinRammler,
+    Sieve,
+    Verdict,
+)
 from .gradation import PERCENTS, percent_size
 
 __all__ = [
@@ -178,7 +189,7 @@ def bootstrap_intervals(
     masses: npt.ArrayLike,
     rel_scale_uncertainty: float | None,
     options: ReportOptions | None = None,
-) -> dict[str, Any]:
+) -> Intervals:
     """Return confidence intervals of D10..D100 (by mass and by count), Cu and Cc.
 
     Args:
@@ -188,10 +199,9 @@ def bootstrap_intervals(
         options: Resamples, confidence and seed.
 
     Returns:
-        ``{"method", "confidence", "resamples", "seed", "scale_rel_uncertainty", "mass":
-        {"d10": [lo, hi], ...}, "count": {...}, "cu": [lo, hi], "cc": [lo, hi]}``; an end is None
-        where more than the tail's share of the draws leave the value undefined (a draw whose
-        smallest rock holds more than p % of the mass says nothing below it).
+        The intervals; an end is None where more than the tail's share of the draws leave the
+        value undefined (a draw whose smallest rock holds more than p % of the mass says nothing
+        below it).
 
     """
     opts = options or ReportOptions()
@@ -229,17 +239,17 @@ def bootstrap_intervals(
             col[math.ceil((1 - tail) * (draws - 1))],
         )
         bounds[key] = [float(x) if math.isfinite(x) else None for x in ends]
-    return {
-        'method': 'bootstrap over rocks, lengths times (1 + scale uncertainty x normal draw)',
-        'confidence': opts.confidence,
-        'resamples': draws,
-        'seed': opts.seed,
-        'scale_rel_uncertainty': u,
-        'mass': {f'd{p}': bounds[f'mass:d{p}'] for p in PERCENTS},
-        'count': {f'd{p}': bounds[f'count:d{p}'] for p in PERCENTS},
-        'cu': bounds['cu'],
-        'cc': bounds['cc'],
-    }
+    return Intervals(
+        method='bootstrap over rocks, lengths times (1 + scale uncertainty x normal draw)',
+        confidence=opts.confidence,
+        resamples=draws,
+        seed=opts.seed,
+        scale_rel_uncertainty=u,
+        mass={f'd{p}': bounds[f'mass:d{p}'] for p in PERCENTS},
+        count={f'd{p}': bounds[f'count:d{p}'] for p in PERCENTS},
+        cu=bounds['cu'],
+        cc=bounds['cc'],
+    )
 
 
 def _limit_row(
@@ -248,7 +258,7 @@ def _limit_row(
     bound: Sequence[float | None],
     value: float | None,
     interval: Sequence[float | None],
-) -> dict[str, Any]:
+) -> LimitRow:
     lo_lim, hi_lim = bound
     lo, hi = interval
     label = f'{key.upper()} by {basis}'
@@ -261,6 +271,7 @@ def _limit_row(
         if x is not None
     ]
     margin = min(margins) if margins else None
+    status: LimitStatus
     if (hi_lim is not None and lo is not None and lo > hi_lim) or (
         lo_lim is not None and hi is not None and hi < lo_lim
     ):
@@ -295,104 +306,100 @@ def _limit_row(
                 crossed or ['limit']
             )
     limit = lo_lim if lo_lim is not None else hi_lim
-    return {
-        'key': key,
-        'min': lo_lim,
-        'max': hi_lim,
-        'value': value,
-        'interval': [lo, hi],
-        'margin': margin,
-        'margin_rel': margin / limit if margin is not None and limit else None,
-        'status': status,
-        'reason': why,
-    }
+    return LimitRow(
+        key=key,
+        min=lo_lim,
+        max=hi_lim,
+        value=value,
+        interval=[lo, hi],
+        margin=margin,
+        margin_rel=margin / limit if margin is not None and limit else None,
+        status=status,
+        reason=why,
+    )
+
+
+def _not_checked() -> ClassDecision:
+    return ClassDecision(None, None, checked=False, passed=None, verdict='NOT CHECKED')
 
 
 def decide(
-    grad: Mapping[str, Any], spec: Mapping[str, Any] | None, intervals: Mapping[str, Any]
-) -> dict[str, Any]:
+    grad: GradationCurve, spec: Mapping[str, Any] | None, intervals: Intervals
+) -> ClassDecision:
     """Check a class: the limits table of report.json and a PASS/FAIL/UNDECIDED verdict.
 
     Args:
-        grad: The gradation dict (``d..`` keys, ``sizes`` and ``percent_passing_count``).
+        grad: The gradation curve (its sizes by mass, or its curve by count).
         spec: The class entry of the class table, or None.
         intervals: What :func:`bootstrap_intervals` returned for the same rocks.
 
     Returns:
-        ``{"class", "basis", "checked", "passed", "verdict", "reasons", "limits": [...],
-        "standard", "edition", "caveat", "note"}``; ``passed`` is True for PASS, False for FAIL and
-        None for UNDECIDED; ``reasons`` says why the verdict is not PASS.
+        The decision; ``passed`` is True for PASS, False for FAIL and None for UNDECIDED;
+        ``reasons`` says why the verdict is not PASS.
 
     """
     if spec is None:
-        return {
-            'class': None,
-            'basis': None,
-            'checked': False,
-            'passed': None,
-            'verdict': 'NOT CHECKED',
-            'reasons': [],
-            'limits': [],
-        }
-    basis = str(spec.get('basis', 'mass'))
+        return _not_checked()
+    basis: Basis = 'count' if spec.get('basis') == 'count' else 'mass'
+    by_key = intervals.of(basis)
     rows = []
     for key, bound in spec['limits'].items():
         if basis == 'count':
-            value = percent_size(grad['sizes'], grad['percent_passing_count'], float(key[1:]))
+            value = percent_size(grad.sizes, grad.percent_passing_count, float(key[1:]))
         else:
-            value = grad.get(key)
-        rows.append(_limit_row(key, basis, bound, value, intervals[basis][key]))
-    states = {r['status'] for r in rows}
-    verdict = 'FAIL' if 'fail' in states else 'UNDECIDED' if 'undecided' in states else 'PASS'
+            value = grad.characteristic[key]
+        rows.append(_limit_row(key, basis, bound, value, by_key[key]))
+    states = {r.status for r in rows}
+    verdict: Verdict = (
+        'FAIL' if 'fail' in states else 'UNDECIDED' if 'undecided' in states else 'PASS'
+    )
     order = ['fail', 'undecided'] if verdict == 'FAIL' else ['undecided']
-    reasons = [r['reason'] for state in order for r in rows if r['status'] == state]
-    return {
-        'class': spec['name'],
-        'basis': basis,
-        'checked': True,
-        'passed': {'PASS': True, 'FAIL': False}.get(verdict),
-        'verdict': verdict,
-        'reasons': reasons,
-        'limits': rows,
-        'standard': spec.get('standard', ''),
-        'edition': spec.get('edition', ''),
-        'caveat': spec.get('caveat', ''),
-        'note': spec.get('note', ''),
-    }
+    return ClassDecision(
+        class_name=str(spec['name']),
+        basis=basis,
+        checked=True,
+        passed={'PASS': True, 'FAIL': False}.get(verdict),
+        verdict=verdict,
+        reasons=[r.reason for state in order for r in rows if r.status == state],
+        limits=rows,
+        standard=str(spec.get('standard', '')),
+        edition=str(spec.get('edition', '')),
+        caveat=str(spec.get('caveat', '')),
+        note=str(spec.get('note', '')),
+    )
 
 
-def refuse(spec: Mapping[str, Any] | None) -> dict[str, Any]:
+def refuse(spec: Mapping[str, Any] | None) -> ClassDecision:
     """Return the class check of a run without metric scale: no verdict, and why."""
-    result = decide({}, None, {})
-    if spec is not None:
-        result.update(
-            {
-                'class': spec['name'],
-                'basis': spec.get('basis', 'mass'),
-                'verdict': 'REFUSED',
-                'reasons': [
-                    'no metric scale (scale method none): sizes are in model units, so the '
-                    f'limits of class {spec["name"]} cannot be checked; capture a scale '
-                    'target or odometry'
-                ],
-            }
-        )
-    return result
+    if spec is None:
+        return _not_checked()
+    return ClassDecision(
+        class_name=str(spec['name']),
+        basis='count' if spec.get('basis') == 'count' else 'mass',
+        checked=False,
+        passed=None,
+        verdict='REFUSED',
+        reasons=[
+            'no metric scale (scale method none): sizes are in model units, so the '
+            f'limits of class {spec["name"]} cannot be checked; capture a scale '
+            'target or odometry'
+        ],
+    )
 
 
-def sieve_table(grad: Mapping[str, Any], unit: str) -> list[dict[str, float]]:
+def sieve_table(grad: GradationCurve, unit: str) -> list[Sieve]:
     """Percent passing by mass and by count at the standard sizes round the measured range.
 
     Args:
-        grad: The gradation dict (``sizes``, ``percent_passing_mass``, ``percent_passing_count``).
+        grad: The gradation curve.
         unit: ``"mm"`` or ``"in"``: which series of sizes.
 
     Returns:
-        ``[{"size": metres, "size_display": in ``unit``, "mass": %, "count": %}]`` from the last
-        size below the smallest rock to the first at or above the largest.
+        One row per size, from the last size below the smallest rock to the first at or above
+        the largest.
 
     """
-    sizes = np.asarray(grad['sizes'], dtype=np.float64)
+    sizes = np.asarray(grad.sizes, dtype=np.float64)
     if len(sizes) == 0:
         return []
     factor = LENGTH_UNITS[unit]
@@ -403,32 +410,20 @@ def sieve_table(grad: Mapping[str, Any], unit: str) -> list[dict[str, float]]:
     for size in series[first : last + 1]:
         # Passing a sieve: every rock no larger than the opening (the curve's step function).
         k = int(np.searchsorted(sizes, size, side='right'))
-        mass = float(grad['percent_passing_mass'][k - 1]) if k else 0.0
-        count = float(grad['percent_passing_count'][k - 1]) if k else 0.0
-        rows.append(
-            {
-                'size': float(size),
-                'size_display': float(size / factor),
-                'mass': mass,
-                'count': count,
-            }
-        )
+        mass = float(grad.percent_passing_mass[k - 1]) if k else 0.0
+        count = float(grad.percent_passing_count[k - 1]) if k else 0.0
+        rows.append(Sieve(float(size), float(size / factor), mass, count))
     return rows
 
 
-def rosin_rammler(grad: Mapping[str, Any]) -> dict[str, Any] | None:
+def rosin_rammler(grad: GradationCurve) -> RosinRammler | None:
     """Fit ``P(d) = 100 (1 - exp(-(d / d_c)^n))`` to the percent passing by mass.
 
     Least squares on ``ln(-ln(1 - P/100)) = n ln d - n ln d_c`` over the points strictly between
     0 and 100 %; None with fewer than three such points.
-
-    Returns:
-        ``{"d_c" [m] (size at 63.2 % passing), "n" (uniformity index), "rms_pct" (RMS residual in
-        percent passing over the fitted points), "points"}``.
-
     """
-    s = np.asarray(grad['sizes'], dtype=np.float64)
-    p = np.asarray(grad['percent_passing_mass'], dtype=np.float64)
+    s = np.asarray(grad.sizes, dtype=np.float64)
+    p = np.asarray(grad.percent_passing_mass, dtype=np.float64)
     use = (p > 0.0) & (p < 100.0) & (s > 0)
     if int(use.sum()) < 3 or np.ptp(np.log(s[use])) <= 0:
         return None
@@ -439,9 +434,9 @@ def rosin_rammler(grad: Mapping[str, Any]) -> dict[str, Any] | None:
         return None
     d_c = float(np.exp(-b / n))
     fitted = 100.0 * (1.0 - np.exp(-((s[use] / d_c) ** n)))
-    return {
-        'd_c': d_c,
-        'n': float(n),
-        'rms_pct': float(np.sqrt(np.mean((fitted - p[use]) ** 2))),
-        'points': int(use.sum()),
-    }
+    return RosinRammler(
+        d_c=d_c,
+        n=float(n),
+        rms_pct=float(np.sqrt(np.mean((fitted - p[use]) ** 2))),
+        points=int(use.sum()),
+    )

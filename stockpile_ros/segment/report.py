@@ -9,18 +9,20 @@ from __future__ import annotations
 
 import base64
 import csv
-import json
 import math
 import os
 import shutil
 from collections.abc import Mapping
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..artefacts import ScaleRecord, save
 from ..errors import StockpileError
 from ..meshio import LabelledMesh, write_labelled_mesh
+from ..result import ClassDecision, LimitRow, ProvenanceRecord, ProvenanceScale, Report, RockRecord
 from .figures import find_keyframe, gradation_png, keyframe_png, render_png
 from .measure import PARTLY_SEEN
 from .pipeline import Analysis
@@ -63,49 +65,46 @@ def _num(x: Any, digits: int = 3) -> str:
     return f'{x:.{digits}g}' if isinstance(x, float) else str(x)
 
 
-def _scale_text(scale: Mapping[str, Any]) -> str:
-    method = str(scale.get('method'))
+def _scale_text(scale: ScaleRecord) -> str:
+    method = scale.method
     if method == 'none':
         return 'none: no metric scale was found; every length is in model units (no verdict)'
-    unc = scale.get('rel_uncertainty')
+    unc = scale.rel_uncertainty
     unc_text = (
         f'relative uncertainty {100 * unc:.2g} %' if unc is not None else 'uncertainty unknown'
     )
     how = _SCALE_HOW.get(method, method)
-    mpu = scale.get('metres_per_unit')
-    return f'{method} ({how}): {_num(mpu, 6)} m per model unit, {unc_text}'
+    return f'{method} ({how}): {_num(scale.metres_per_unit, 6)} m per model unit, {unc_text}'
 
 
-def _reason(row: Mapping[str, Any], basis: str, length: Any, unit: str) -> str:
-    label = f'{row["key"].upper()} by {basis}'
-    if row['value'] is None or row['interval'][0] is None:
-        return str(row['reason'])
+def _reason(row: LimitRow, basis: str, length: Any, unit: str) -> str:
+    label = f'{row.key.upper()} by {basis}'
+    lo, hi = row.interval
+    if row.value is None or lo is None:
+        return row.reason
     bounds = ', '.join(
-        f'{name} {length(row[name])}' for name in ('min', 'max') if row[name] is not None
+        f'{name} {length(bound)}'
+        for name, bound in (('min', row.min), ('max', row.max))
+        if bound is not None
     )
-    lo, hi = row['interval']
-    verb = 'fails' if row['status'] == 'fail' else 'undecided'
+    verb = 'fails' if row.status == 'fail' else 'undecided'
     return (
-        f'{label} {verb}: measured {length(row["value"])} {unit}, interval '
+        f'{label} {verb}: measured {length(row.value)} {unit}, interval '
         f'{length(lo)}-{length(hi)} {unit}, limits {bounds} {unit}'
     )
 
 
-def _provenance(report: Mapping[str, Any], provenance: Provenance) -> dict[str, Any]:
-    scale = report['scale']
-    return {
-        **provenance.as_dict(),
-        'keyframes_used': len(report['keyframes']),
-        'scale': {
-            'method': scale.get('method'),
-            'rel_uncertainty': scale.get('rel_uncertainty'),
-            'how': _scale_text(scale),
-        },
-    }
+def _provenance(report: Report, provenance: Provenance) -> ProvenanceRecord:
+    scale = report.scale
+    return ProvenanceRecord(
+        **asdict(provenance),
+        keyframes_used=len(report.keyframes),
+        scale=ProvenanceScale(scale.method, scale.rel_uncertainty, _scale_text(scale)),
+    )
 
 
 def page_context(
-    report: Mapping[str, Any],
+    report: Report,
     options: ReportOptions,
     images: Mapping[str, bytes],
     keyframe_note: str,
@@ -113,13 +112,13 @@ def page_context(
     """Everything the page and the PDF show, formatted in the display units.
 
     Args:
-        report: The report.json dict, ``provenance`` included.
+        report: The report, ``provenance`` included.
         options: Display units and interval settings.
         images: PNG bytes by name (``gradation``, ``render``, optionally ``keyframe``).
         keyframe_note: Which keyframe is shown, or why none is.
 
     """
-    metric = report['units'] != 'model'
+    metric = report.metric
     lu = options.length_unit if metric else 'model units'
     lf = LENGTH_UNITS[options.length_unit] if metric else 1.0
     mu, mf = options.mass_unit, MASS_UNITS[options.mass_unit]
@@ -127,69 +126,63 @@ def page_context(
     digits = 4 if options.length_unit == 'mm' else 3
 
     def length(x: float | None) -> str:
-        return '-' if x is None else f'{x / lf:.{digits}g}'
+        return '-' if x is None or not math.isfinite(x) else f'{x / lf:.{digits}g}'
 
     def interval(pair: list[float | None]) -> str:
         lo, hi = pair
         return f'{"<" if lo is None else length(lo)} - {length(hi)}' if hi is not None else '-'
 
-    g = report['gradation']
-    spec = g['spec']
-    iv = g['intervals']
-    basis = spec.get('basis') or 'mass'
+    g = report.gradation
+    spec = g.spec
+    iv = g.intervals
+    basis = spec.basis or 'mass'
     limits = [
         {
-            'label': f'{row["key"].upper()} by {basis}',
-            'min': length(row['min']),
-            'max': length(row['max']),
-            'value': length(row['value']),
-            'interval': interval(row['interval']),
-            'margin': length(row['margin']) if row['margin'] is not None else '-',
-            'margin_pct': _num(100 * row['margin_rel'], 2)
-            if row['margin_rel'] is not None
-            else '-',
-            'status': row['status'],
+            'label': f'{row.key.upper()} by {basis}',
+            'min': length(row.min),
+            'max': length(row.max),
+            'value': length(row.value),
+            'interval': interval(row.interval),
+            'margin': length(row.margin) if row.margin is not None else '-',
+            'margin_pct': _num(100 * row.margin_rel, 2) if row.margin_rel is not None else '-',
+            'status': row.status,
         }
-        for row in spec.get('limits', [])
+        for row in spec.limits
     ]
     dsizes = [
-        {'name': f'D{p}', 'value': length(g[f'd{p}']), 'interval': interval(iv['mass'][f'd{p}'])}
-        for p in (10, 15, 30, 50, 60, 85, 100)
+        {'name': key.upper(), 'value': length(value), 'interval': interval(iv.mass[key])}
+        for key, value in g.characteristic.items()
     ]
     dsizes += [
         {
-            'name': name.capitalize(),
-            'value': _num(g[name]),
-            'interval': '-'
-            if iv[name][1] is None
-            else f'{_num(iv[name][0])} - {_num(iv[name][1])}',
+            'name': name,
+            'value': _num(value),
+            'interval': '-' if pair[1] is None else f'{_num(pair[0])} - {_num(pair[1])}',
         }
-        for name in ('cu', 'cc')
+        for name, value, pair in (('Cu', g.cu, iv.cu), ('Cc', g.cc, iv.cc))
     ]
     # The page states its reasons in the units of its tables (report.json keeps them in metres).
-    reasons = [
-        _reason(row, basis, length, lu) for row in spec.get('limits', []) if row['status'] != 'pass'
-    ]
-    if spec['verdict'] == 'FAIL':
+    reasons = [_reason(row, basis, length, lu) for row in spec.limits if row.status != 'pass']
+    if spec.verdict == 'FAIL':
         reasons.sort(key=lambda text: 'fails' not in text)
-    rr = g.get('rosin_rammler')
+    rr = g.rosin_rammler
     head = ['id', f'a [{lu}]', f'b [{lu}]', f'c [{lu}]', f'ESD [{lu}]', f'volume [{vu}]']
     head += [f'mass [{mu}]'] if metric else []
     head += ['visible %', 'a/c', 'sphericity', 'confidence']
     rows = []
-    for r in report['rocks']:
-        low = r['visible_fraction'] < PARTLY_SEEN
+    for r in report.rocks:
+        low = r.visible_fraction < PARTLY_SEEN
         cells = [
-            f'{r["id"]}{" !" if low else ""}',
-            *(length(r[k]) for k in ('a', 'b', 'c', 'esd')),
-            _num(r['volume'] / vf if r['volume'] is not None else None),
+            f'{r.id}{" !" if low else ""}',
+            *(length(x) for x in (r.a, r.b, r.c, r.esd)),
+            _num(r.volume / vf),
         ]
-        cells += [_num(r['mass'] / mf if r['mass'] is not None else None)] if metric else []
+        cells += [_num(r.mass / mf if r.mass is not None else None)] if metric else []
         cells += [
-            f'{100 * r["visible_fraction"]:.0f}',
-            _num(r['fer'], 2),
-            _num(r['sphericity'], 2),
-            _num(r['confidence'], 2),
+            f'{100 * r.visible_fraction:.0f}',
+            _num(r.fer, 2),
+            _num(r.sphericity, 2),
+            _num(r.confidence, 2),
         ]
         rows.append({'low': low, 'cells': cells})
     rock_note = (
@@ -205,35 +198,31 @@ def page_context(
         if metric
         else 'model (no metric scale): no metres, no kilograms'
     )
-    total = g.get('total_mass')
+    total = g.total_mass
     return {
-        'p': report['provenance'],
+        'p': report.provenance,
         'spec': spec,
-        'reasons': reasons if spec['checked'] else list(spec['reasons']),
+        'reasons': reasons if spec.checked else list(spec.reasons),
         'g': g,
-        'verdict_class': str(spec['verdict']).replace(' ', ''),
-        'conf_pct': f'{iv["confidence"]:.0%}',
-        'scale_unc': f'{100 * iv["scale_rel_uncertainty"]:.2g} %',
+        'verdict_class': spec.verdict.replace(' ', ''),
+        'conf_pct': f'{iv.confidence:.0%}',
+        'scale_unc': f'{100 * iv.scale_rel_uncertainty:.2g} %',
         'limits': limits,
         'dsizes': dsizes,
         'lu': lu,
         'units_text': units_text,
         'total_mass': f'{total / mf:.4g} {mu}' if metric and total is not None else '',
         'rr': None
-        if not rr
+        if rr is None
         else {
-            'd_c': length(rr['d_c']),
-            'n': f'{rr["n"]:.2f}',
-            'rms': f'{rr["rms_pct"]:.1f}',
-            'points': rr['points'],
+            'd_c': length(rr.d_c),
+            'n': f'{rr.n:.2f}',
+            'rms': f'{rr.rms_pct:.1f}',
+            'points': rr.points,
         },
         'sieves': [
-            {
-                'size': f'{s["size_display"]:g}',
-                'mass': f'{s["mass"]:.1f}',
-                'count': f'{s["count"]:.1f}',
-            }
-            for s in g.get('sieves', [])
+            {'size': f'{s.size_display:g}', 'mass': f'{s.mass:.1f}', 'count': f'{s.count:.1f}'}
+            for s in g.sieves
         ],
         'sieve_note': (
             'Share of the measured rocks whose b is at most the size (the curve between rocks is '
@@ -248,9 +237,9 @@ def page_context(
         'rock_head': head,
         'rock_rows': rows,
         'rock_note': rock_note,
-        'warnings': report.get('warnings', []),
-        'frame_id': report['frame_id'],
-        'schema': report['schema'],
+        'warnings': report.warnings,
+        'frame_id': report.frame_id,
+        'schema': report.schema,
     }
 
 
@@ -320,45 +309,46 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
     from matplotlib.image import imread
 
     a4 = (8.27, 11.69)
-    p, spec = context['p'], context['spec']
+    p: ProvenanceRecord = context['p']
+    spec: ClassDecision = context['spec']
     with PdfPages(path) as pdf:
         fig = Figure(figsize=a4)
         fig.text(
             0.06,
             0.965,
-            f'Stockpile report{": " + p["pile"] if p["pile"] else ""}',
+            f'Stockpile report{": " + p.pile if p.pile else ""}',
             fontsize=16,
             weight='bold',
             va='top',
         )
-        changed = ', '.join(f'{k} = {v}' for k, v in p['parameters_changed'].items())
+        changed = ', '.join(f'{k} = {v}' for k, v in p.parameters_changed.items())
         y = _text_block(
             fig,
             0.935,
             [
-                f'Site: {p["site"] or "(not given)"}    Pile: {p["pile"] or "(not given)"}    '
-                f'Operator: {p["operator"] or "(not given)"}',
-                f'Created (UTC): {p["created"]}    Tool: stockpile_ros {p["tool_version"]}    '
-                f'Keyframes used: {p["keyframes_used"]}',
-                f'Input: {p["input_path"]}',
-                f'sha256 {p["input_sha256"] or "-"} ({p["fingerprint_method"]})',
-                f'Scale: {p["scale"]["how"]}',
+                f'Site: {p.site or "(not given)"}    Pile: {p.pile or "(not given)"}    '
+                f'Operator: {p.operator or "(not given)"}',
+                f'Created (UTC): {p.created}    Tool: stockpile_ros {p.tool_version}    '
+                f'Keyframes used: {p.keyframes_used}',
+                f'Input: {p.input_path}',
+                f'sha256 {p.input_sha256 or "-"} ({p.fingerprint_method})',
+                f'Scale: {p.scale.how}',
                 f'Units: {context["units_text"]}',
                 f'Parameters changed: {changed or "none (every parameter at its default)"}',
             ],
         )
-        colour = {'PASS': 'green', 'FAIL': 'red'}.get(spec['verdict'], '#b35900')
-        title = spec['verdict'] + (f' - class {spec["class"]}' if spec['class'] else '')
+        colour = {'PASS': 'green', 'FAIL': 'red'}.get(spec.verdict, '#b35900')
+        title = spec.verdict + (f' - class {spec.class_name}' if spec.class_name else '')
         fig.text(0.06, y, title, fontsize=15, weight='bold', color=colour, va='top')
         y = _text_block(fig, y - 0.03, [f'- {r}' for r in context['reasons']])
-        if spec['checked']:
+        if spec.checked:
             y = _text_block(
                 fig,
                 y,
                 [
-                    f'Standard: {spec["standard"]}, edition {spec["edition"]}'
-                    + (f' ({spec["note"]})' if spec.get('note') else ''),
-                    f'Limits on b by {spec["basis"]}, sizes in {context["lu"]}; intervals '
+                    f'Standard: {spec.standard}, edition {spec.edition}'
+                    + (f' ({spec.note})' if spec.note else ''),
+                    f'Limits on b by {spec.basis}, sizes in {context["lu"]}; intervals '
                     f'{context["conf_pct"]} (bootstrap over rocks with the scale uncertainty '
                     f'{context["scale_unc"]}).',
                 ],
@@ -383,7 +373,7 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
                 rows,
                 0.02 * (len(rows) + 1),
             )
-            y = _text_block(fig, y, [f'Class table caveat: {spec["caveat"] or "(none given)"}'])
+            y = _text_block(fig, y, [f'Class table caveat: {spec.caveat or "(none given)"}'])
         for w in context['warnings']:
             y = _text_block(fig, y, [f'Warning: {w}'], 7.5)
         ds = context['dsizes']
@@ -474,24 +464,29 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
             pdf.savefig(fig)
 
 
-def _write_csv(path: Path, analysis: Analysis, report: Mapping[str, Any]) -> None:
-    units = report['units']
+def _csv_values(rock: RockRecord) -> list[float | None]:
+    """Return the values of the ``ROCK_COLUMNS`` after ``id``, in order."""
+    return [rock.a, rock.b, rock.c, rock.esd, rock.volume, rock.mass, rock.visible_area,
+            rock.visible_fraction, rock.fer, rock.sphericity, rock.confidence]  # fmt: skip
+
+
+def _write_csv(path: Path, analysis: Analysis, report: Report) -> None:
     with path.open('w', newline='') as out_csv:
         writer = csv.writer(out_csv)
         writer.writerow(
             [*ROCK_COLUMNS[:1], 'x', 'y', 'z', *ROCK_COLUMNS[1:], 'faces', 'partly_seen', 'units']
         )
         faces = {r.id: r.faces for r in analysis.rocks}
-        for r in report['rocks']:
-            values = ['' if r[c] is None else r[c] for c in ROCK_COLUMNS[1:]]
+        for r in report.rocks:
+            values = ['' if x is None or not math.isfinite(x) else x for x in _csv_values(r)]
             writer.writerow(
                 [
-                    r['id'],
-                    *r['centroid'],
+                    r.id,
+                    *r.centroid,
                     *values,
-                    faces[r['id']],
-                    int(r['visible_fraction'] < PARTLY_SEEN),
-                    units,
+                    faces[r.id],
+                    int(r.visible_fraction < PARTLY_SEEN),
+                    report.units,
                 ]
             )
 
@@ -505,7 +500,7 @@ def write_result_folder(
 ) -> dict[str, Path]:
     """Write the result folder of docs/formats.md and return the paths written.
 
-    Adds ``provenance`` to ``analysis.report`` (so that what is published matches the files).
+    Sets ``analysis.report.provenance`` (so that what is published matches the files).
     The folder is written beside and renamed into place: it never holds half a result, nor a
     mix of this run's files and an earlier run's.
 
@@ -527,8 +522,8 @@ def write_result_folder(
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir()
     report = analysis.report
-    report['provenance'] = _provenance(report, provenance)
-    metric = report['units'] != 'model'
+    report.provenance = _provenance(report, provenance)
+    metric = report.metric
     paths = {
         name: folder / name
         for name in (
@@ -541,7 +536,7 @@ def write_result_folder(
             'report.pdf',
         )
     }
-    paths['report.json'].write_text(json.dumps(report, indent=1, allow_nan=False))
+    save(report, paths['report.json'])
     labels = analysis.segmentation.labels
     write_labelled_mesh(
         paths['segments.ply'],
@@ -550,15 +545,15 @@ def write_result_folder(
     _write_csv(paths['rocks.csv'], analysis, report)
     unit = opts.length_unit if metric else None
     images = {
-        'gradation': gradation_png(report, unit),
-        'render': render_png(analysis.vertices, analysis.faces, labels, report['rocks'], unit),
+        'gradation': gradation_png(report.gradation, unit),
+        'render': render_png(analysis.vertices, analysis.faces, labels, report.rocks, unit),
     }
-    centroids = np.asarray([r['centroid'] for r in report['rocks']]).reshape(-1, 3)
-    view, note = find_keyframe(keyframes_dir, report['keyframes'], centroids)
+    centroids = np.asarray([r.centroid for r in report.rocks]).reshape(-1, 3)
+    view, note = find_keyframe(keyframes_dir, report.keyframes, centroids)
     if view is not None:
         try:
             images['keyframe'] = keyframe_png(
-                view, analysis.vertices, analysis.faces, labels, report['rocks']
+                view, analysis.vertices, analysis.faces, labels, report.rocks
             )
             note = (
                 f'Keyframe {view.file.name} (stamp {view.stamp_ns}), the one that sees most rocks'

@@ -1,7 +1,9 @@
 """Read the two sides of an evaluation: the simulator's truth folder and a result folder.
 
 Only the files of the contract in ``docs/formats.md`` are read: ``truth.json`` + ``scene.ply`` and
-``report.json`` + ``segments.ply``.
+``report.json`` + ``segments.ply``. ``report.json`` is read as the
+:class:`~stockpile_ros.result.Report` it was written as (its schema and every field checked);
+``truth.json`` by the keys it needs.
 """
 
 from __future__ import annotations
@@ -16,8 +18,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from ...artefacts import ArtefactError, load
 from ...errors import StockpileError
 from ...meshio import LabelledMesh, read_labelled_mesh
+from ...result import Report, RockRecord
 
 __all__ = [
     'EvaluationError',
@@ -173,10 +177,20 @@ def _poses(items: Any, where: str) -> Poses:
     if not isinstance(items, list):
         raise EvaluationError(f'{where}: expected a list of poses')
     try:
-        stamps = np.array([int(p['stamp_ns']) for p in items], dtype=np.int64)
-        centres = np.array([p['position'] for p in items], dtype=np.float64).reshape(-1, 3)
-        quats = np.array([p['orientation_xyzw'] for p in items], dtype=np.float64).reshape(-1, 4)
+        stamps = [int(p['stamp_ns']) for p in items]
+        centres = [p['position'] for p in items]
+        quats = [p['orientation_xyzw'] for p in items]
     except (KeyError, TypeError, ValueError) as exc:
+        raise EvaluationError(f'{where}: malformed pose ({exc})') from None
+    return _pose_arrays(stamps, centres, quats, where)
+
+
+def _pose_arrays(stamps_ns: Any, centres: Any, quats_xyzw: Any, where: str) -> Poses:
+    try:
+        stamps = np.array(stamps_ns, dtype=np.int64)
+        centres = np.array(centres, dtype=np.float64).reshape(-1, 3)
+        quats = np.array(quats_xyzw, dtype=np.float64).reshape(-1, 4)
+    except (TypeError, ValueError) as exc:
         raise EvaluationError(f'{where}: malformed pose ({exc})') from None
     if len(quats) and np.any(np.linalg.norm(quats, axis=1) < 1e-9):
         raise EvaluationError(f'{where}: zero quaternion')
@@ -203,6 +217,25 @@ def _rocks(items: Any, where: str) -> dict[int, Rock]:
             c=_number(item.get('c')),
             volume=_number(item.get('volume')),
             visible_fraction=_number(item.get('visible_fraction')),
+        )
+    return rocks
+
+
+def _result_rocks(items: list[RockRecord], where: str) -> dict[int, Rock]:
+    rocks: dict[int, Rock] = {}
+    for item in items:
+        if item.id <= 0:
+            raise EvaluationError(f'{where}: rock with invalid id {item.id} (ids are integers > 0)')
+        if item.id in rocks:
+            raise EvaluationError(f'{where}: rock id {item.id} listed twice')
+        rocks[item.id] = Rock(
+            id=item.id,
+            centroid=np.asarray(item.centroid, dtype=np.float64),
+            a=_number(item.a),
+            b=_number(item.b),
+            c=_number(item.c),
+            volume=_number(item.volume),
+            visible_fraction=_number(item.visible_fraction),
         )
     return rocks
 
@@ -238,24 +271,30 @@ def load_result(path: str | Path) -> ResultSide:
     """Read a result folder (or its ``report.json``; ``segments.ply`` is taken from beside it).
 
     Raises:
-        EvaluationError: A file is missing or does not follow the report contract.
+        EvaluationError: A file is missing, or ``report.json`` is not a report this code reads
+            (another or a newer schema, a missing field or one of the wrong type).
 
     """
     folder, json_path = _folder_and_file(path, 'report.json', 'result')
-    data = _read_json(json_path)
+    if not json_path.is_file():
+        raise EvaluationError(f'{json_path}: no such file')
+    try:
+        report = load(Report, json_path)
+    except ArtefactError as exc:
+        raise EvaluationError(str(exc)) from None
     where = str(json_path)
-    if not str(data.get('schema', '')).startswith('stockpile-report/'):
-        raise EvaluationError(f'{where}: not a stockpile report (schema {data.get("schema")!r})')
-    scale = _field(data, 'scale', where)
-    method = scale.get('method') if isinstance(scale, dict) else None
-    if not isinstance(method, str):
-        raise EvaluationError(f'{where}: "scale" needs a "method"')
+    keyframes = report.keyframes
     return ResultSide(
         path=folder,
-        frame_id=str(_field(data, 'frame_id', where)),
-        scale_method=method,
-        keyframes=_poses(_field(data, 'keyframes', where), where + ' keyframes'),
-        rocks=_rocks(_field(data, 'rocks', where), where),
-        d50=_d50(data),
+        frame_id=report.frame_id,
+        scale_method=report.scale.method,
+        keyframes=_pose_arrays(
+            [k.stamp_ns for k in keyframes],
+            [k.position for k in keyframes],
+            [k.orientation_xyzw for k in keyframes],
+            where + ' keyframes',
+        ),
+        rocks=_result_rocks(report.rocks, where),
+        d50=_number(report.gradation.d50),
         mesh=_read_mesh(folder / 'segments.ply'),
     )

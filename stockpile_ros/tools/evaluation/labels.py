@@ -73,7 +73,7 @@ class LabelScore:
 
 
 def _d50(rocks: list[SizedRock]) -> float:
-    d = gradation([r.b for r in rocks], [r.mass for r in rocks])['d50']
+    d = gradation([r.b for r in rocks], [r.mass for r in rocks]).d50
     return float(d) if d is not None else float('nan')
 
 

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from ...artefacts import to_json
 from ...bagio.writer import BagWriter
 from ...camera import CameraModel
 from ...errors import StockpileError
@@ -397,7 +398,7 @@ def simulate(cfg: SimulationConfig, bag: str | Path) -> SimulationSummary:
         'target': _target_dict(scene),
         'specific_gravity': SPECIFIC_GRAVITY,
         'rocks': rocks,
-        'gradation': gradation([r['b'] for r in rocks], [r['mass'] for r in rocks]),
+        'gradation': to_json(gradation([r['b'] for r in rocks], [r['mass'] for r in rocks])),
     }
     write_truth(truth_path, truth, scene_mesh(scene.rocks, GROUND_HALF))
     return SimulationSummary(bag_path, truth_path, cfg.frames, len(scene.rocks), truth)

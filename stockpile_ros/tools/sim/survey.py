@@ -11,7 +11,6 @@ are, one to a cell of a grid. The truth (``truth.json``,
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,12 +19,14 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from ...artefacts import MeshInfo, load, to_json
 from ...bagio.writer import BagWriter
 from ...geometry import Similarity
+from ...result import Report
 from ...ros import messages as m
 from ...ros.outputs import pointcloud2
 from ...segment.gradation import gradation
-from ..evaluation import evaluate_sides, load_result, load_truth
+from ..evaluation import EvaluationError, evaluate_sides, load_result, load_truth
 from ..synthetic import SyntheticPile, sample_scene
 from .pile import PileConfig, build_pile
 from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
@@ -118,7 +119,7 @@ def simulate_survey(
         'target': None,
         'specific_gravity': SPECIFIC_GRAVITY,
         'rocks': truths,
-        'gradation': gradation([r['b'] for r in truths], [r['mass'] for r in truths]),
+        'gradation': to_json(gradation([r['b'] for r in truths], [r['mass'] for r in truths])),
     }  # fmt: skip
     write_truth(out, truth, scene)
     points = sampled.points + rng.normal(0.0, noise, len(sampled.points))[:, None] * sampled.normals
@@ -141,7 +142,7 @@ def score_survey(
     result_dir: str | Path,
     truth_dir: str | Path,
     survey: Survey,
-    mesh_info: dict[str, Any] | None = None,
+    mesh_info: MeshInfo | None = None,
 ) -> dict[str, Any]:
     """Score a result made from a survey cloud against its truth (:func:`~.evaluation.evaluate`).
 
@@ -151,11 +152,13 @@ def score_survey(
     ``survey.survey_to_pile``.
     """
     result = load_result(result_dir)
-    report = json.loads((Path(result_dir) / 'report.json').read_text())
-    record = (mesh_info or report['mesh'])['model_to_stockpile']
-    rotation = np.asarray(record['rotation'], dtype=np.float64).reshape(3, 3)
-    scale, shift = float(record['scale']), np.asarray(record['translation'], dtype=np.float64)
-    metres = float(report['scale']['metres_per_unit'])
+    report = load(Report, Path(result_dir) / 'report.json')
+    record = report.mesh.model_to_stockpile if mesh_info is None else mesh_info.model_to_stockpile
+    if record is None:
+        raise EvaluationError(f'{result_dir}: the report records no model_to_stockpile')
+    rotation = np.asarray(record.rotation, dtype=np.float64).reshape(3, 3)
+    scale, shift = record.scale, np.asarray(record.translation, dtype=np.float64)
+    metres = report.scale.metres_per_unit
     to = survey.survey_to_pile
 
     def back(points: F64) -> F64:
