@@ -5,7 +5,8 @@ shuffled; the same walk filmed as 40 MJPG frames, self-calibrated, keyframes as 
 them); ``wide`` and ``low`` are other scenes, walks and marker places, held out from the
 test's. Per walk and capture: keyframes, registered,
 the focal length's error, the scale error against the true camera centres, the stated
-uncertainty and its parts. Then, with the true poses and camera (so only the corners are judged),
+uncertainty (one standard deviation), the error in stated uncertainties (z) and the parts.
+Then, with the true poses and camera (so only the corners are judged),
 the marker scale from cv2.aruco's cornerSubPix corners (the baseline, measured in this run) and
 from the edge-fitted corners :func:`~stockpile_ros.recon.scale.detect_markers` gives.
 
@@ -16,10 +17,8 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -27,8 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'tests'))
 
-from recon_synth import look_at, marker_decal, render, scene_mesh
-from test_photos import CAM, MARKER, H, W, write_photos
+from recon_synth import look_at, scene_mesh
+from test_photos import CAM, LOOK_AT, MARKER, WALKS, H, W, Walk, write_photos
 
 from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.geometry import umeyama
@@ -46,37 +45,6 @@ from stockpile_ros.recon.stages import photo_names, run_keyframes, run_sfm_stage
 from stockpile_ros.settings import build_settings
 
 FRAMES = 40
-LOOK_AT = np.array([0.3, 0.0, 0.0])
-
-
-@dataclass(frozen=True)
-class Walk:
-    """An arc round the pile at a height that rises and falls, and where the marker lies."""
-
-    radius: float
-    arc: float
-    height: float
-    wobble: float
-    periods: float
-    marker: tuple[float, float]
-    seed: int
-
-    def centre(self, t: float) -> np.ndarray:
-        angle = self.arc * (t - 0.5)
-        height = self.height + self.wobble * math.sin(2 * math.pi * self.periods * t)
-        return np.array([self.radius * math.cos(angle), self.radius * math.sin(angle), height])
-
-    def view(self, mesh: object, t: float) -> np.ndarray:
-        rot, trans = look_at(self.centre(t), LOOK_AT)
-        decal = marker_decal('DICT_4X4_50', 7, 0.25, self.marker)
-        return render(mesh, CAM.k, (W, H), rot, trans, decals=(decal,))
-
-
-WALKS = {
-    'test': Walk(2.4, 1.4, 1.45, 0.25, 3, (1.15, 0.0), 0),
-    'wide': Walk(2.8, 1.6, 1.7, 0.3, 2, (0.9, 0.6), 1),
-    'low': Walk(2.1, 1.2, 1.25, 0.15, 4, (1.1, -0.4), 2),
-}
 
 
 def photos(walk: Walk, mesh: object, folder: Path) -> dict[str, float]:
@@ -130,9 +98,10 @@ def capture(
     focal = next(iter(model.views.values())).camera.fx / CAM.fx - 1
     parts = ', '.join(f'{k} {100 * v:.2f}' for k, v in scale.parts.items() if v is not None)
     rel = scale.rel_uncertainty or float('nan')
+    error = scale.metres_per_unit / true - 1
     print(f'{label:13s} {counts.frames:6d} {counts.keyframes:9d} '
           f'{report.registered:10d} {100 * focal:+7.2f} '
-          f'{100 * (scale.metres_per_unit / true - 1):+8.3f} {100 * rel:7.3f}   {parts}',
+          f'{100 * error:+8.3f} {100 * rel:7.3f} {error / rel:+5.2f}   {parts}',
           flush=True)  # fmt: skip
     return corners(label, walk, store, t)
 
@@ -164,7 +133,7 @@ def main() -> None:
     args = parser.parse_args()
     root = args.work or Path(tempfile.mkdtemp(prefix='bench_marker_scale_'))
     print(f'work: {root}')
-    print('walk, source  frames keyframes registered focal %  scale %  stated %  parts %')
+    print('walk, source  frames keyframes registered focal %  scale %  stated %     z   parts %')
     lines = []
     for name in args.walks:
         walk, folder = WALKS[name], root / name
