@@ -5,7 +5,9 @@ shuffled; the same walk filmed as 40 MJPG frames, self-calibrated, keyframes as 
 them); ``wide`` and ``low`` are other scenes, walks and marker places, held out from the
 test's. Per walk and capture: keyframes, registered,
 the focal length's error, the scale error against the true camera centres, the stated
-uncertainty and its parts. Then, with the true poses and camera (so only the corners are judged),
+uncertainty (one standard deviation), the error in stated uncertainties (z), the scale error
+against the pile's own sparse points (see :func:`pile_scale`) and its z, and the parts.
+Then, with the true poses and camera (so only the corners are judged),
 the marker scale from cv2.aruco's cornerSubPix corners (the baseline, measured in this run) and
 from the edge-fitted corners :func:`~stockpile_ros.recon.scale.detect_markers` gives.
 
@@ -16,19 +18,18 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+import pycolmap
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / 'tests'))
 
-from recon_synth import look_at, marker_decal, render, scene_mesh
-from test_photos import CAM, MARKER, H, W, write_photos
+from recon_synth import look_at, scene_mesh
+from test_photos import CAM, LOOK_AT, MARKER, WALKS, H, W, Walk, write_photos
 
 from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.geometry import umeyama
@@ -39,6 +40,7 @@ from stockpile_ros.recon.scale import (
     detect_markers,
     parse_targets,
     scale_from_markers,
+    triangulate,
 )
 from stockpile_ros.recon.scaling import estimate_scale
 from stockpile_ros.recon.sfm import load_sparse
@@ -46,37 +48,6 @@ from stockpile_ros.recon.stages import photo_names, run_keyframes, run_sfm_stage
 from stockpile_ros.settings import build_settings
 
 FRAMES = 40
-LOOK_AT = np.array([0.3, 0.0, 0.0])
-
-
-@dataclass(frozen=True)
-class Walk:
-    """An arc round the pile at a height that rises and falls, and where the marker lies."""
-
-    radius: float
-    arc: float
-    height: float
-    wobble: float
-    periods: float
-    marker: tuple[float, float]
-    seed: int
-
-    def centre(self, t: float) -> np.ndarray:
-        angle = self.arc * (t - 0.5)
-        height = self.height + self.wobble * math.sin(2 * math.pi * self.periods * t)
-        return np.array([self.radius * math.cos(angle), self.radius * math.sin(angle), height])
-
-    def view(self, mesh: object, t: float) -> np.ndarray:
-        rot, trans = look_at(self.centre(t), LOOK_AT)
-        decal = marker_decal('DICT_4X4_50', 7, 0.25, self.marker)
-        return render(mesh, CAM.k, (W, H), rot, trans, decals=(decal,))
-
-
-WALKS = {
-    'test': Walk(2.4, 1.4, 1.45, 0.25, 3, (1.15, 0.0), 0),
-    'wide': Walk(2.8, 1.6, 1.7, 0.3, 2, (0.9, 0.6), 1),
-    'low': Walk(2.1, 1.2, 1.25, 0.15, 4, (1.1, -0.4), 2),
-}
 
 
 def photos(walk: Walk, mesh: object, folder: Path) -> dict[str, float]:
@@ -130,11 +101,37 @@ def capture(
     focal = next(iter(model.views.values())).camera.fx / CAM.fx - 1
     parts = ', '.join(f'{k} {100 * v:.2f}' for k, v in scale.parts.items() if v is not None)
     rel = scale.rel_uncertainty or float('nan')
+    error = scale.metres_per_unit / true - 1
+    pile = scale.metres_per_unit / pile_scale(work, walk, t) - 1
     print(f'{label:13s} {counts.frames:6d} {counts.keyframes:9d} '
           f'{report.registered:10d} {100 * focal:+7.2f} '
-          f'{100 * (scale.metres_per_unit / true - 1):+8.3f} {100 * rel:7.3f}   {parts}',
+          f'{100 * error:+8.3f} {100 * rel:7.3f} {error / rel:+5.2f} {100 * pile:+7.3f} '
+          f'{pile / rel:+5.2f}   {parts}',
           flush=True)  # fmt: skip
     return corners(label, walk, store, t)
+
+
+def pile_scale(work: WorkFolder, walk: Walk, t: dict[str, float]) -> float:
+    """Metres per model unit of the sparse points on and round the pile (within 1 m of its centre).
+
+    Their true places are triangulated from the same image points with the true cameras. With
+    a focal length off the truth the model is no similarity of the world: the scene shrinks or
+    grows against the camera path, and the pile (the rocks measured) is scaled by what lies near
+    it, the marker, more nearly than the camera centres say.
+    """
+    rec = pycolmap.Reconstruction(str(work.sparse))
+    true = {i: look_at(walk.centre(t[rec.image(i).name]), LOOK_AT) for i in rec.reg_image_ids()
+            if rec.image(i).name in t}  # fmt: skip
+    model, world = [], []
+    for point in rec.points3D.values():
+        rays = [(CAM, *true[e.image_id],
+                 np.asarray(rec.image(e.image_id).points2D[e.point2D_idx].xy) - 0.5)
+                for e in point.track.elements if e.image_id in true]  # fmt: skip
+        place = triangulate(rays, 1.0) if len(rays) >= 3 else None
+        if place is not None and np.linalg.norm(place[:2]) < 1.0:
+            model.append(np.asarray(point.xyz))
+            world.append(place)
+    return umeyama(np.array(model), np.array(world)).scale
 
 
 def corners(label: str, walk: Walk, store: KeyframeStore, t: dict[str, float]) -> list[str]:
@@ -164,7 +161,8 @@ def main() -> None:
     args = parser.parse_args()
     root = args.work or Path(tempfile.mkdtemp(prefix='bench_marker_scale_'))
     print(f'work: {root}')
-    print('walk, source  frames keyframes registered focal %  scale %  stated %  parts %')
+    print('walk, source  frames keyframes registered focal %  scale %  stated %     z'
+          '  pile %     z   parts %')  # fmt: skip
     lines = []
     for name in args.walks:
         walk, folder = WALKS[name], root / name

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from stockpile_ros.recon.scale import (
     detect_markers,
     off_path,
     parse_targets,
+    replicate_spread,
     scale_from_markers,
     scale_from_odometry,
     scale_from_target,
@@ -332,3 +335,38 @@ def test_combine() -> None:
     sure = combine(t, ScaleEstimate('odometry', 1.03, 0.001, 20))
     assert sure.rel_uncertainty is not None and sure.rel_uncertainty > 0.014
     assert 'disagree' in sure.note
+
+
+def test_replicate_spread_is_the_scale_carried_to_the_model() -> None:
+    """A replicate in other units (its centres k times the model's) with a target k times smaller
+    there is the same scale: no spread; targets that differ beyond the units spread by as much."""
+    cam = CameraModel.from_fov(640, 480, 60.0)
+    poses = {}
+    for i in range(6):
+        angle = -0.6 + 0.24 * i
+        centre = np.array([2.0 * math.cos(angle), 2.0 * math.sin(angle), 1.2 + 0.1 * i])
+        rot, trans = _look_at(centre, np.zeros(3))
+        poses[f'v{i}'] = (cam, rot, trans)
+
+    def scaled(k: float) -> dict[str, tuple[CameraModel, np.ndarray, np.ndarray]]:
+        return {n: (c, rot, k * trans) for n, (c, rot, trans) in poses.items()}
+
+    units = [0.5, 1.0, 2.0, 3.0] * 3
+    same = replicate_spread(poses, [scaled(k) for k in units], lambda p: 2.0 / _unit(p, poses))
+    assert same == pytest.approx(0.0, abs=1e-9)
+    wobble = np.array([-0.01, 0.01] * 6)
+    replicates = [scaled(k) for k in units]
+    values = iter(wobble)
+    spread = replicate_spread(
+        poses, replicates, lambda p: 2.0 * math.exp(next(values)) / _unit(p, poses)
+    )
+    assert spread == pytest.approx(0.01, rel=1e-6)
+    # Too few replicates that give a scale: no spread.
+    assert replicate_spread(poses, replicates[:5], lambda p: 1.0) is None
+    assert replicate_spread(poses, replicates, lambda p: None) is None
+
+
+def _unit(replicate: dict, poses: dict) -> float:
+    """How many replicate units one unit of ``poses`` is (from the first view's distance)."""
+    name = next(iter(poses))
+    return float(np.linalg.norm(replicate[name][2]) / np.linalg.norm(poses[name][2]))

@@ -8,8 +8,10 @@ geometry: a board by a similarity fit to its corner layout (uncertainty from a b
 corners), markers and bars by the ratio of known to triangulated lengths (uncertainty from the
 spread of the detections: leave-one-view-out over the views, and across markers when there are
 several), each with the printed size's own tolerance in quadrature. Marker corners are where
-lines fitted to the four outer edges meet (:func:`_edge_corners`). In a model whose camera was
-self-calibrated the focal length's own uncertainty is added to a target's (the pipeline does).
+lines fitted to the four outer edges meet (:func:`_edge_corners`). What the model adds, the
+poses and a self-calibrated focal length that carry a target's scale to the rest of it, is the
+spread of the target's scale over copies of the model adjusted again on half of its points
+(:func:`replicate_spread`), added in quadrature (the pipeline does).
 
 Odometry: keyframe centres are fitted to the odometry positions at the keyframe stamps; its
 uncertainty is the fit's bootstrap spread and the odometry's own calibration uncertainty (a wheel
@@ -20,7 +22,7 @@ Target and odometry are combined by inverse-variance weighting of the log scales
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
@@ -45,9 +47,11 @@ __all__ = [
     'detect_charuco',
     'detect_markers',
     'dictionary_code',
+    'marker_scale',
     'off_path',
     'parse_targets',
     'pool_targets',
+    'replicate_spread',
     'scale_from_markers',
     'scale_from_odometry',
     'scale_from_target',
@@ -294,9 +298,10 @@ class ScaleEstimate:
         note: A warning about the estimate, empty when none.
         parts: The relative uncertainties ``rel_uncertainty`` is made of, by name (``fit`` and
             ``calibration`` for odometry; ``detections``, ``markers`` and ``printed_size`` for
-            markers; ``focal`` added to a target's when the camera was self-calibrated, see
-            :func:`stockpile_ros.recon.sfm.focal_uncertainty`; ``target`` and ``odometry``
-            when both are combined).
+            markers; ``model`` added to a target's, what the poses and the focal length add,
+            see :func:`replicate_spread`, or ``focal`` in its place where no re-adjusted copies
+            of the model could be made, see :func:`stockpile_ros.recon.sfm.focal_uncertainty`;
+            ``target`` and ``odometry`` when both are combined).
 
     """
 
@@ -397,8 +402,8 @@ def triangulate(
 
 
 def scale_from_target(
-    detections: dict[str, tuple[npt.NDArray[np.int64], F64]],
-    poses: dict[str, tuple[CameraModel, F64, F64]],
+    detections: Mapping[str, tuple[npt.NDArray[np.int64], F64]],
+    poses: Mapping[str, tuple[CameraModel, F64, F64]],
     spec: TargetSpec,
     min_corners: int = 5,
     min_views: int = 3,
@@ -633,6 +638,60 @@ def _log_scale(units: Mapping[str, tuple[F64, F64]]) -> tuple[float, dict[str, f
     weights = {u: float(np.mean(m)) ** 2 for u, (_, m) in units.items()}
     total = sum(weights.values())
     return sum(weights[u] * logs[u] for u in logs) / total, logs
+
+
+def marker_scale(
+    detections: Mapping[str, MarkerDetections],
+    poses: _Poses,
+    specs: Sequence[MarkerSpec | BarSpec],
+    *,
+    min_views: int = 3,
+) -> float | None:
+    """Return the scale :func:`scale_from_markers` gives, without its uncertainty (or None)."""
+    units, _ = _marker_lengths(_marker_corners(detections, poses, min_views, ''), specs)
+    return math.exp(_log_scale(units)[0]) if units else None
+
+
+def replicate_spread(
+    poses: _Poses,
+    replicates: Sequence[_Poses],
+    scale: Callable[[_Poses], float | None],
+    min_rounds: int = 10,
+) -> float | None:
+    """Relative spread of a target's scale of the model over re-adjusted copies of the model.
+
+    A target fixes the scale where it lies; the poses and the focal length carry it to the rest
+    of the model, and they are only as good as bundle adjustment made them. Each replicate
+    (:func:`stockpile_ros.recon.sfm.resampled_poses`: the model adjusted again on half of its
+    points) has units of its own: its camera centres, fitted onto the model's by a similarity,
+    say how many of its units one model unit is, and the target's scale in the replicate times
+    that is again metres per model unit. The spread of that about its mean over the replicates
+    (delete-half jackknife) is the part of the scale's uncertainty the model adds: the focal
+    length's and the poses' together, with however the scale depends on them.
+
+    Args:
+        poses: The model's cameras and poses.
+        replicates: The re-adjusted copies.
+        scale: Metres per unit of a set of poses (the target's estimate), None when none.
+        min_rounds: Fewest replicates that must give a scale.
+
+    Returns:
+        The relative standard deviation, None with fewer usable replicates.
+
+    """
+    centres = {n: -rot.T @ trans for n, (_, rot, trans) in poses.items()}
+    logs = []
+    for replicate in replicates:
+        names = sorted(n for n in centres if n in replicate)
+        value = scale(replicate) if len(names) >= 3 else None
+        if value is None or not value > 0:
+            continue
+        src = np.array([centres[n] for n in names])
+        dst = np.array([-replicate[n][1].T @ replicate[n][2] for n in names])
+        logs.append(math.log(value * umeyama(src, dst).scale))
+    if len(logs) < min_rounds:
+        return None
+    return float(np.sqrt(np.mean((np.asarray(logs) - np.mean(logs)) ** 2)))
 
 
 def scale_from_markers(

@@ -7,6 +7,7 @@ the stockpile frame lies in the odometry frame.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..artefacts import MeshInfo, SparseSummary, WorkFolder, load
+from ..camera import CameraModel
 from ..geometry import Similarity, umeyama
 from .keyframes import KeyframeStore
 from .options import ReconOptions
@@ -26,13 +28,15 @@ from .scale import (
     combine,
     detect_charuco,
     detect_markers,
+    marker_scale,
     off_path,
     pool_targets,
+    replicate_spread,
     scale_from_markers,
     scale_from_odometry,
     scale_from_target,
 )
-from .sfm import SparseModel
+from .sfm import SparseModel, resampled_poses
 
 __all__ = ['estimate_scale', 'odom_from_stockpile', 'on_path']
 
@@ -84,14 +88,18 @@ def on_path(
 
 
 def _target_scale(
-    store: KeyframeStore, model: SparseModel, options: ReconOptions, focal: float | None
+    work: WorkFolder, model: SparseModel, options: ReconOptions, sparse: SparseSummary | None
 ) -> tuple[ScaleEstimate | None, dict[str, Any]]:
     """Scale from the boards and markers of ``options.target``, pooled, with what each gave.
 
-    ``focal`` is the relative uncertainty of a self-calibrated focal length
-    (:func:`.sfm.focal_uncertainty`), added in quadrature as the part ``focal``: the target's
-    scale is carried to the whole model through depths that rest on it.
+    What the model adds to the targets' own uncertainty, the part ``model``, is the spread of
+    the pooled scale over copies of the model bundle-adjusted again on random halves of its
+    points (:func:`.sfm.resampled_poses`, :func:`.scale.replicate_spread`): a target's scale is
+    carried to the whole model through poses and depths that rest on the focal length, and a
+    self-calibrated focal length is the largest part of it. Where no copies can be made the
+    focal length's covariance (:func:`.sfm.focal_uncertainty`) stands in as the part ``focal``.
     """
+    store = KeyframeStore(work.keyframes)
     boards = [t for t in options.target if isinstance(t, TargetSpec)]
     markers = [t for t in options.target if isinstance(t, (MarkerSpec, BarSpec))]
     dictionaries = [t.dictionary for t in markers]
@@ -112,9 +120,11 @@ def _target_scale(
     poses = {n: (v.camera, v.rotation, v.translation) for n, v in model.views.items()}
     estimates: dict[str, ScaleEstimate] = {}
     details: dict[str, Any] = {}
+    names = {}
     for i, (board, hits) in enumerate(zip(boards, board_hits, strict=True)):
         estimate = scale_from_target(hits, poses, board)
         name = f'charuco {i}' if len(boards) > 1 else 'charuco'
+        names[name] = i
         details[name] = {'views_with_corners': len(hits),
                          'estimate': None if estimate is None else estimate.__dict__}  # fmt: skip
         if estimate is not None:
@@ -131,10 +141,33 @@ def _target_scale(
         }
         if estimate is not None:
             estimates['markers'] = estimate
+
+    def pooled_scale(replicate: Mapping[str, tuple[CameraModel, F64, F64]]) -> float | None:
+        """Pool the targets' scales with other poses, each weighed as in the model."""
+        again = {}
+        for name, estimate in estimates.items():
+            if name == 'markers':
+                value = marker_scale(marker_hits, replicate, markers)
+            else:
+                board = scale_from_target(board_hits[names[name]], replicate, boards[names[name]])
+                value = None if board is None else board.metres_per_unit
+            if value is None:
+                return None
+            again[name] = replace(estimate, metres_per_unit=value)
+        pooled = pool_targets(again)
+        return None if pooled is None else pooled.metres_per_unit
+
     pooled = pool_targets(estimates)
-    if pooled is not None and pooled.rel_uncertainty is not None and focal is not None:
-        pooled = replace(pooled, rel_uncertainty=math.hypot(pooled.rel_uncertainty, focal),
-                         parts={**pooled.parts, 'focal': focal})  # fmt: skip
+    if pooled is not None and pooled.rel_uncertainty is not None:
+        fixed = sparse is not None and sparse.camera.startswith('fixed')
+        replicates = resampled_poses(work.sparse, refine_intrinsics=not fixed)
+        spread = replicate_spread(poses, replicates, pooled_scale)
+        focal = None if sparse is None else sparse.focal_rel_uncertainty
+        part, value = ('model', spread) if spread is not None else ('focal', focal)
+        if value is not None:
+            pooled = replace(pooled, rel_uncertainty=math.hypot(pooled.rel_uncertainty, value),
+                             parts={**pooled.parts, part: value})  # fmt: skip
+        details['model_replicates'] = len(replicates)
     details['views'] = len(model.views)
     return pooled, details
 
@@ -147,9 +180,9 @@ def estimate_scale(
     details: dict[str, Any] = {}
     target = None
     if options.target:
-        sparse = work.sparse / 'sparse.json'
-        focal = load(SparseSummary, sparse).focal_rel_uncertainty if sparse.exists() else None
-        target, details['target'] = _target_scale(store, model, options, focal)
+        path = work.sparse / 'sparse.json'
+        sparse = load(SparseSummary, path) if path.exists() else None
+        target, details['target'] = _target_scale(work, model, options, sparse)
     odometry = None
     if options.use_odometry:
         names, stamps, centres, positions = _odometry_pairs(store, model)
