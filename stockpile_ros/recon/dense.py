@@ -392,15 +392,20 @@ class _VoxelSums:
 
     def _merge(self) -> None:
         keys = np.concatenate([self.keys, *(k for k, _ in self.pending)])
-        values = np.concatenate([self.sums, *(v for _, v in self.pending)])
         weights = np.concatenate([self.counts, *(np.ones(len(k)) for k, _ in self.pending)])
         self.keys, inverse = np.unique(keys, return_inverse=True)
+        del keys
         n = len(self.keys)
         self.counts = np.bincount(inverse, weights=weights, minlength=n).astype(np.float64)
-        self.sums = np.stack(
-            [np.bincount(inverse, weights=values[:, c], minlength=n) for c in range(9)], axis=1
-        )
+        # Summed a column at a time: the whole batch and the sums concatenated at once were the
+        # stage's peak memory (2.7 GiB at 80 keyframes of 1280x960).
+        old, batches = self.sums, [v for _, v in self.pending]
         self.pending, self.pending_points = [], 0
+        sums = np.empty((n, 9), dtype=np.float64)
+        for c in range(9):
+            column = np.concatenate([old[:, c], *(v[:, c] for v in batches)])
+            sums[:, c] = np.bincount(inverse, weights=column, minlength=n)
+        self.sums = sums
 
     def cloud(self) -> o3d.geometry.PointCloud:
         """Return the voxel means: points, colours, and as normals the mean view directions."""
