@@ -5,11 +5,13 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
 from stockpile_ros.artefacts import KeyframePose, ScaleRecord
+from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 from stockpile_ros.result import MeasureRecord, MeshRecord, Report, RockRecord, SegmentationRecord
 from stockpile_ros.segment.params import RockScale
 from stockpile_ros.segment.pipeline import grade
@@ -22,6 +24,14 @@ def small_pile() -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], object
     pile = make_pile(4, seed=3, size=(0.15, 0.22), spread=0.2, density=20000, candidates=3)
     v, f = poisson_mesh(pile.points, pile.normals, depth=7)
     return v, f, pile
+
+
+def small_pile_file(folder: Path) -> Path:
+    """Write the small pile's mesh (no labels) as ``folder/mesh.ply``; return its path."""
+    v, f, _ = small_pile()
+    path = folder / 'mesh.ply'
+    write_labelled_mesh(path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    return path
 
 
 def height_field(

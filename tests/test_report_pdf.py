@@ -5,12 +5,10 @@ from __future__ import annotations
 import csv
 import math
 
-import numpy as np
 import pypdfium2 as pdfium
-from segment_fixtures import small_pile
+from segment_fixtures import small_pile_file
 
 from stockpile_ros.cli import main
-from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 
 
 def _page_lines(path) -> list[list[str]]:
@@ -22,9 +20,7 @@ def _page_lines(path) -> list[list[str]]:
 
 
 def test_the_pdf_lists_every_rock_in_aligned_columns(tmp_path) -> None:
-    v, f, _ = small_pile()
-    mesh_path = tmp_path / 'mesh.ply'
-    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    mesh_path = small_pile_file(tmp_path)
     out = tmp_path / 'result'
     assert main(['segment', str(mesh_path), '--out', str(out), '--units', 'm']) == 0
     with (out / 'rocks.csv').open() as handle:

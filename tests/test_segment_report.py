@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from segment_fixtures import make_report, small_pile
+from segment_fixtures import make_report, small_pile, small_pile_file
 
 from stockpile_ros.artefacts import KeyframePose, MeshInfo, ScaleRecord, from_json, load
 from stockpile_ros.cli import main
@@ -108,9 +108,7 @@ def test_orientation_is_the_measured_axes() -> None:
 
 
 def test_a_run_without_scale_shows_no_metres_and_no_verdict(tmp_path, capsys) -> None:
-    v, f, _ = small_pile()
-    mesh_path = tmp_path / 'mesh.ply'
-    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    mesh_path = small_pile_file(tmp_path)
     out = tmp_path / 'unscaled'
     assert main(['segment', str(mesh_path), '--out', str(out), '--spec-class', 'I']) == 0
     printed = capsys.readouterr().out
@@ -136,9 +134,7 @@ def test_a_run_without_scale_shows_no_metres_and_no_verdict(tmp_path, capsys) ->
 
 
 def test_cli_paper_mode_without_mesh_info(tmp_path) -> None:
-    v, f, _ = small_pile()
-    mesh_path = tmp_path / 'mesh.ply'
-    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    mesh_path = small_pile_file(tmp_path)
     out = tmp_path / 'paper'
     assert main(['segment', str(mesh_path), '--out', str(out), '--mode', 'paper']) == 0
     report = load(Report, out / 'report.json')
@@ -202,9 +198,7 @@ def test_a_keyframe_photo_gets_the_rocks_outlined(tmp_path) -> None:
 
 
 def test_the_result_folder_is_replaced_whole_never_mixed(tmp_path, capsys) -> None:
-    v, f, _ = small_pile()
-    mesh_path = tmp_path / 'mesh.ply'
-    write_labelled_mesh(mesh_path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    mesh_path = small_pile_file(tmp_path)
     out = tmp_path / 'result'
     argv = ['segment', str(mesh_path), '--out', str(out), '--units', 'm']
     assert main(argv) == 0
