@@ -321,6 +321,12 @@ class ScaleRecord:
         """Whether lengths are metres."""
         return self.method != 'none'
 
+    def summary(self) -> str:
+        """One line for a person: the method, its relative uncertainty and the parts of it."""
+        unc = '' if self.rel_uncertainty is None else f' +/- {100 * self.rel_uncertainty:.2g} %'
+        parts = ', '.join(f'{k} {100 * v:.2g} %' for k, v in self.parts.items() if v is not None)
+        return f'{self.method}{unc}' + (f' ({parts})' if parts else '')
+
 
 @dataclass
 class SimilarityRecord:

@@ -176,10 +176,7 @@ def _scale_line(mesh: MeshInfo) -> str:
             f'scale: none: every size is in model units, not metres ({why}); put a printed '
             'marker in view and give it, e.g. --set recon.target=aruco:DICT_4X4_50:0:0.15'
         )
-    rel = scale.rel_uncertainty
-    unc = '' if rel is None else f' +/- {100 * rel:.2f} %'
-    parts = ', '.join(f'{k} {100 * v:.2f} %' for k, v in scale.parts.items() if v is not None)
-    return f'scale: {scale.method}{unc}' + (f' ({parts})' if parts else '')
+    return f'scale: {scale.summary()}'
 
 
 def summary_lines(s: SourceSummary) -> tuple[list[str], list[str]]:

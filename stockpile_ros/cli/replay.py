@@ -69,10 +69,8 @@ def _print_summary(s: ReplaySummary) -> None:
               f'reprojection {sfm.mean_reprojection_error_px:.2f} px')  # fmt: skip
     if s.report is not None:
         scale = s.report.scale
-        rel = scale.rel_uncertainty
-        unc = '' if rel is None else f' +/- {100 * rel:.1f} %'
         note = '' if scale.metric else ': every size is in model units, not metres'
-        print(f'scale: {scale.method}{unc}{note}')
+        print(f'scale: {scale.summary()}{note}')
         for line in result_lines(s.report):
             print(line)
         print(f'result: {s.result_dir}')
