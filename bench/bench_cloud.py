@@ -20,6 +20,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = '1'
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import pickle  # noqa: E402
 import shutil  # noqa: E402
 import time  # noqa: E402
@@ -40,8 +41,10 @@ def survey(folder: Path, rocks: int, spacing: float) -> Survey:
     """Return the cached survey, or simulate it (its truth in ``folder/truth``)."""
     path = folder / 'survey.pickle'
     if path.exists():
-        loaded: Survey = pickle.loads(path.read_bytes())
-        return loaded
+        # A cache pickled by an older layout of the package is simulated again.
+        with contextlib.suppress(ModuleNotFoundError, AttributeError):
+            loaded: Survey = pickle.loads(path.read_bytes())
+            return loaded
     pile = PileConfig(rocks=rocks, gradation=parse_gradation('0.1:0.35'))
     made = simulate_survey(folder / 'truth', pile, seed=11, spacing=spacing, noise=0.002)
     path.write_bytes(pickle.dumps(made))

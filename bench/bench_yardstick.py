@@ -28,6 +28,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 
 import argparse  # noqa: E402
 import ast  # noqa: E402
+import contextlib  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -46,7 +47,9 @@ def bed(material: str, rocks: int, seed: int, cache: Path):
     lo, hi = MATERIALS[material]
     path = cache / f'{material}-{rocks}-{seed}.pickle'
     if path.exists():
-        return pickle.loads(path.read_bytes())
+        # A cache pickled by an older layout of the package is built again.
+        with contextlib.suppress(ModuleNotFoundError, AttributeError):
+            return pickle.loads(path.read_bytes())
     cfg = BedConfig(rocks=rocks, gradation=Gradation((lo, hi), (0.0, 100.0)))
     placed = build_bed(np.random.default_rng(seed), cfg)
     path.write_bytes(pickle.dumps(placed))

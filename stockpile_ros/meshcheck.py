@@ -32,6 +32,7 @@ __all__ = [
     'UNITS',
     'MeshCheck',
     'check_mesh',
+    'degenerate_faces',
     'read_mesh',
 ]
 
@@ -109,14 +110,16 @@ class MeshCheck:
     warnings: list[str] = field(default_factory=list)
 
 
-def _degenerate(vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]) -> Any:
+def degenerate_faces(
+    vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]
+) -> npt.NDArray[np.bool_]:
     """Mask of faces with a repeated vertex index or zero area."""
     f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
     repeated = (f0 == f1) | (f1 == f2) | (f0 == f2)
     p0, p1, p2 = vertices[f0], vertices[f1], vertices[f2]
     twice_area = np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
     longest = np.max([np.einsum('ij,ij->i', d, d) for d in (p1 - p0, p2 - p1, p0 - p2)], axis=0)
-    return repeated | (twice_area <= _ZERO_HEIGHT * longest)
+    return np.asarray(repeated | (twice_area <= _ZERO_HEIGHT * longest), dtype=bool)
 
 
 def _first_of_each_set(faces: npt.NDArray[np.int64]) -> npt.NDArray[np.intp]:
@@ -181,7 +184,7 @@ def check_mesh(
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * scale
     faces = np.asarray(mesh.faces, dtype=np.int64)
     check_arrays(vertices, faces, source)
-    degenerate = _degenerate(vertices, faces)
+    degenerate = degenerate_faces(vertices, faces)
     kept = np.flatnonzero(~degenerate)
     unique = kept[_first_of_each_set(faces[kept])]
     duplicates = len(kept) - len(unique)
