@@ -15,6 +15,7 @@ from typing import Any
 
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy
 from std_srvs.srv import Trigger
 
 from stockpile_ros.nodes.common import qos_profile
@@ -33,8 +34,13 @@ class Recorder(Node):
         self.lock = threading.Lock()
         self.got: list[tuple[str, Any, float]] = []  # topic, message, time.monotonic()
         for entry in OUTPUTS:
+            # Reliability and durability as the table says, but every sample kept until its
+            # callback runs: with the table's depth of 1 for latched topics, two statuses in quick
+            # succession on a loaded machine left only the second one.
+            profile = qos_profile(entry.qos)
+            profile.history = HistoryPolicy.KEEP_ALL
             self.create_subscription(get_message(entry.msgtype), entry.name,
-                                     self._keep(entry.name), qos_profile(entry.qos))  # fmt: skip
+                                     self._keep(entry.name), profile)  # fmt: skip
 
     def _keep(self, name: str) -> Any:
         def callback(msg: Any) -> None:
