@@ -34,7 +34,7 @@ from .settings import Settings, defaults, write_effective
 __all__ = ['ReplaySummary', 'replay']
 
 # Offered as transient local in the output bag, so that `ros2 bag play` republishes them latched.
-_LATCHED_QOS = ('latched', 'tf_static')
+_LATCHED_QOS = ('latched', 'status', 'tf_static')
 
 
 @dataclass

@@ -50,7 +50,7 @@ def qos_profile(qos: topics.Qos) -> QoSProfile:
     history = HistoryPolicy.KEEP_ALL if depth == 0 else HistoryPolicy.KEEP_LAST
     best_effort = qos in ('sensor', 'pose')
     reliability = ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE
-    durable = qos in ('stream', 'latched', 'tf_static')
+    durable = qos in ('stream', 'latched', 'status', 'tf_static')
     durability = DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE
     return QoSProfile(history=history, depth=max(depth, 1), reliability=reliability,
                       durability=durability)  # fmt: skip

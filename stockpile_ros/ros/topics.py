@@ -41,7 +41,7 @@ __all__ = [
     'topic',
 ]
 
-Qos = Literal['sensor', 'pose', 'reliable', 'stream', 'latched', 'tf', 'tf_static']
+Qos = Literal['sensor', 'pose', 'reliable', 'stream', 'latched', 'status', 'tf', 'tf_static']
 """QoS classes (the nodes map each onto an rclpy profile, the replay onto the offered QoS):
 
 - ``sensor``: best effort, keep last 50 (camera, camera info: a lost sample is not sent again, so
@@ -56,6 +56,10 @@ Qos = Literal['sensor', 'pose', 'reliable', 'stream', 'latched', 'tf', 'tf_stati
   the publisher holds at most ``selector.max_keyframes`` of them);
 - ``latched``: reliable, transient local, keep last 1 (results: a dashboard that joins late gets
   the last one);
+- ``status``: reliable, transient local, keep last 10 (pipeline statuses: with a writer's history
+  of one, a status replaced before a reader had it was never delivered, and "mesh ready;
+  segmenting" followed by the result within milliseconds lost the first; a late joiner gets the
+  last ten, the newest last);
 - ``tf`` and ``tf_static``: reliable, keep last 1000 (tf2's own use 100; a moving mast's transforms
   must not be dropped while the node is busy), the static one transient local.
 """
@@ -66,6 +70,7 @@ QOS_DEPTH: dict[Qos, int] = {
     'reliable': 10,
     'stream': 0,
     'latched': 1,
+    'status': 10,
     'tf': 1000,
     'tf_static': 1000,
 }
@@ -138,7 +143,7 @@ TABLE: tuple[Topic, ...] = (
     Topic(TRIGGER, 'std_msgs/msg/Empty', 'reliable', (), (_RC,)),
     # Each keyframe with its image, camera and pose: nothing but DDS between cart and base.
     Topic(KEYFRAMES, 'stockpile_msgs/msg/Keyframe', 'stream', (_KF,), (_RC,)),
-    Topic(KEYFRAME_STATUS, 'stockpile_msgs/msg/PipelineStatus', 'latched', (_KF,), (_RC,)),
+    Topic(KEYFRAME_STATUS, 'stockpile_msgs/msg/PipelineStatus', 'status', (_KF,), (_RC,)),
     # The metric z-up surface the segmentation cuts into rocks.
     Topic(SURFACE, 'stockpile_msgs/msg/SurfaceMesh', 'latched', (_RC,), (_SG,)),
     # Absolute: the diagnostic aggregator listens there.
@@ -149,7 +154,7 @@ TABLE: tuple[Topic, ...] = (
     Topic(ROCK_MARKERS, 'visualization_msgs/msg/MarkerArray', 'latched', (_SG,)),
     Topic(ROCKS, 'stockpile_msgs/msg/RockArray', 'latched', (_SG,)),
     Topic(GRADATION, 'stockpile_msgs/msg/Gradation', 'latched', (_SG,)),
-    Topic(STATUS, 'stockpile_msgs/msg/PipelineStatus', 'latched', (_RC, _SG)),
+    Topic(STATUS, 'stockpile_msgs/msg/PipelineStatus', 'status', (_RC, _SG)),
 )
 
 
