@@ -239,6 +239,11 @@ class SparseSummary:
         focal_rel_uncertainty: Relative standard deviation of a focal length bundle adjustment
             refined (:func:`.recon.sfm.focal_uncertainty`), None for a fixed camera.
         unregistered_photos: Photo names of the keyframes left out (photo sources).
+        target_focal: Per camera whose focal length the targets' views measured
+            (:func:`.recon.sfm.pin_focal`): ``camera_id``, ``sfm_focal_px`` and ``sfm_k1`` (as
+            self-calibrated), ``focal_px`` and ``k1``, ``rel_uncertainty`` (jackknife), ``views``,
+            ``rms_px`` and ``used`` (the model re-adjusted with them held); empty for a fixed
+            camera or without targets.
         gate: The registration gate's report (:class:`.recon.gates.GateReport`), None before.
 
     """
@@ -261,6 +266,7 @@ class SparseSummary:
     median_triangulation_angle_deg: float = math.nan
     focal_rel_uncertainty: float | None = None
     unregistered_photos: list[str] = field(default_factory=list)
+    target_focal: list[dict[str, Any]] = field(default_factory=list)
     gate: dict[str, Any] | None = None
     schema: str = SCHEMA
 

@@ -184,11 +184,11 @@ def test_video_of_the_same_scene_scales_the_same(tmp_path: Path) -> None:
 def test_held_out_walk_scale_within_its_stated_spread(tmp_path: Path) -> None:
     """Walk ``low`` (another scene, a lower and shorter walk, the marker elsewhere), as photos.
 
-    Its self-calibrated focal length comes out 0.77 % long though the EXIF prior was within
-    0.07 %, and the scale follows it: measured +1.27 % against the true camera centres, stated
-    0.63 % (the half-point re-adjustments spread it by 0.55 %). Before the re-adjustments the
-    stated 0.47 % came from the focal length's covariance (0.35 %). The test fails when the
-    estimate or its spread regresses: an error past 1.6 % or past 2.5 stated spreads.
+    Self-calibrated, its focal length came out 0.77 % long though the EXIF prior was within
+    0.07 %, and the scale followed it: +1.27 % against the true camera centres. The marker's own
+    views now measure the focal length and k1 (Zhang's planar calibration) and the model is held
+    to them: the focal length within 0.16 % of the truth, the scale -0.35 %. The test fails when
+    the focal length or the scale regresses, or the stated uncertainty stops covering the error.
     """
     walk = WALKS['low']
     mesh = scene_mesh(walk.seed)
@@ -198,13 +198,19 @@ def test_held_out_walk_scale_within_its_stated_spread(tmp_path: Path) -> None:
     work = WorkFolder(tmp_path / 'work')
     options = build_settings({'recon.target': MARKER}).recon
     run_keyframes(folder, work, options)
-    assert run_sfm_stage(work, options).registered == 16
+    sparse = run_sfm_stage(work, options)
+    assert sparse.registered == 16
+    (pinned,) = sparse.target_focal
+    assert pinned['used'] and pinned['views'] >= 12
+    assert abs(pinned['focal_px'] / CAM.fx - 1) <= 0.005, pinned
+    assert 'focal length from the targets' in sparse.camera
     truth = {name: walk.centre(t) for name, t in where.items()}
     registered, scale, error = _scale_error(work, truth, photo_names(work))
     assert registered == 16
-    assert abs(error) <= 0.016, error
+    assert abs(error) <= 0.006, error
     assert scale.rel_uncertainty is not None and abs(error) <= 2.5 * scale.rel_uncertainty
-    assert scale.parts['model'] is not None and scale.parts['model'] > 0.003
+    assert scale.parts['focal'] == pytest.approx(pinned['rel_uncertainty'])
+    assert scale.parts['model'] is not None and scale.parts['model'] > 0
 
 
 def test_replay_of_photos_without_a_target_says_model_units(

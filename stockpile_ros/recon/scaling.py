@@ -160,13 +160,22 @@ def _target_scale(
     pooled = pool_targets(estimates)
     if pooled is not None and pooled.rel_uncertainty is not None:
         fixed = sparse is not None and sparse.camera.startswith('fixed')
-        replicates = resampled_poses(work.sparse, refine_intrinsics=not fixed)
+        # A focal length the targets measured is held in the copies as in the model, and its
+        # own uncertainty is a part of its own (a focal length off by a share moves the scale
+        # by about as much).
+        pinned = [
+            e['rel_uncertainty'] for e in (sparse.target_focal if sparse else []) if e['used']
+        ]
+        replicates = resampled_poses(work.sparse, refine_intrinsics=not (fixed or pinned))
         spread = replicate_spread(poses, replicates, pooled_scale)
-        focal = None if sparse is None else sparse.focal_rel_uncertainty
-        part, value = ('model', spread) if spread is not None else ('focal', focal)
-        if value is not None:
-            pooled = replace(pooled, rel_uncertainty=math.hypot(pooled.rel_uncertainty, value),
-                             parts={**pooled.parts, part: value})  # fmt: skip
+        focal = max(pinned) if pinned else None if sparse is None else sparse.focal_rel_uncertainty
+        parts = {'model': spread} if spread is not None else {}
+        if focal is not None and (pinned or spread is None):
+            parts['focal'] = focal
+        if parts:
+            extra = math.hypot(*parts.values())
+            pooled = replace(pooled, rel_uncertainty=math.hypot(pooled.rel_uncertainty, extra),
+                             parts={**pooled.parts, **parts})  # fmt: skip
         details['model_replicates'] = len(replicates)
     details['views'] = len(model.views)
     return pooled, details

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import shutil
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -26,6 +27,7 @@ from ..artefacts import KeyframeRecord, ModelImages, SparseSummary, save
 from ..camera import CameraModel
 from ..errors import CaptureError
 from ..ranges import Range
+from .calibration import PlanarView, target_focal
 
 __all__ = [
     'SfmOptions',
@@ -33,6 +35,7 @@ __all__ = [
     'View',
     'focal_uncertainty',
     'load_sparse',
+    'pin_focal',
     'resampled_poses',
     'run_sfm',
 ]
@@ -583,25 +586,83 @@ def resampled_poses(
     if len(ids) < 20 or base.num_reg_images() < 3:
         return []
     rng = np.random.default_rng(seed)
-    options = pycolmap.BundleAdjustmentOptions()
-    options.print_summary = False
-    options.refine_principal_point = False
-    options.refine_focal_length = refine_intrinsics
-    options.refine_extra_params = refine_intrinsics
-    # One thread: the same model gives the same halves and the same spread on every run.
-    options.ceres.solver_options.num_threads = 1
     out = []
     for _ in range(rounds):
         rec = pycolmap.Reconstruction(base)
         for point_id in rng.permutation(ids)[: len(ids) // 2]:
             rec.delete_point3D(int(point_id))
-        config = pycolmap.BundleAdjustmentConfig()
-        for image_id in rec.reg_image_ids():
-            config.add_image(image_id)
-        config.fix_gauge(pycolmap.BundleAdjustmentGauge.THREE_POINTS)
-        summary = pycolmap.create_default_ceres_bundle_adjuster(options, config, rec).solve()
-        if summary.is_solution_usable():
+        if _adjust(rec, refine_focal=refine_intrinsics, refine_extra=refine_intrinsics):
             out.append(_poses(rec))
+    return out
+
+
+def _adjust(rec: pycolmap.Reconstruction, *, refine_focal: bool, refine_extra: bool) -> bool:
+    """Bundle-adjust every registered image of ``rec`` in place; whether it converged."""
+    options = pycolmap.BundleAdjustmentOptions()
+    options.print_summary = False
+    options.refine_principal_point = False
+    options.refine_focal_length = refine_focal
+    options.refine_extra_params = refine_extra
+    # One thread: the same model gives the same adjustment on every run.
+    options.ceres.solver_options.num_threads = 1
+    config = pycolmap.BundleAdjustmentConfig()
+    for image_id in rec.reg_image_ids():
+        config.add_image(image_id)
+    config.fix_gauge(pycolmap.BundleAdjustmentGauge.THREE_POINTS)
+    summary = pycolmap.create_default_ceres_bundle_adjuster(options, config, rec).solve()
+    return bool(summary.is_solution_usable())
+
+
+def pin_focal(
+    sparse_dir: Path, planes: Mapping[str, list[PlanarView]], max_change: float = 0.1
+) -> list[dict[str, Any]]:
+    """Set each camera's focal length and k1 to what its images' target planes give; re-adjust.
+
+    For each ``SIMPLE_RADIAL`` camera of the model (self-calibrated) whose registered images see
+    at least :data:`.calibration.MIN_VIEWS` target planes, the focal length and k1 are measured
+    on them (:func:`.calibration.target_focal`, the principal point held); when the focal length
+    is within ``max_change`` of the model's, both replace the model's and the model is
+    bundle-adjusted again with the intrinsics held. The model in ``sparse_dir`` is rewritten
+    when any camera changed.
+
+    Args:
+        sparse_dir: The COLMAP model written by :func:`run_sfm`.
+        planes: Target planes by image name (:func:`.calibration.planar_views`).
+        max_change: Largest relative change of a focal length accepted.
+
+    Returns:
+        Per camera measured: the focal lengths before and after, the uncertainty, the views
+        and whether it was used (for ``sparse.json``).
+
+    """
+    rec = pycolmap.Reconstruction(str(sparse_dir))
+    by_camera: dict[int, list[PlanarView]] = {}
+    for image_id in rec.reg_image_ids():
+        image = rec.image(image_id)
+        by_camera.setdefault(int(image.camera_id), []).extend(planes.get(image.name, []))
+    out: list[dict[str, Any]] = []
+    for camera_id, views in sorted(by_camera.items()):
+        camera = rec.camera(camera_id)
+        if str(camera.model_name) != 'SIMPLE_RADIAL':
+            continue
+        model = _opencv_camera(camera)
+        found = target_focal(views, model)
+        if found is None:
+            continue
+        used = abs(found.focal_px / model.fx - 1) <= max_change
+        out.append({'camera_id': camera_id, 'sfm_focal_px': model.fx,
+                    'sfm_k1': float(camera.params[3]), 'focal_px': found.focal_px, 'k1': found.k1,
+                    'rel_uncertainty': found.rel_uncertainty, 'views': found.views,
+                    'rms_px': found.rms_px, 'used': used})  # fmt: skip
+        if used:
+            params = np.array(camera.params, dtype=np.float64)
+            params[0], params[3] = found.focal_px, found.k1
+            camera.params = params.tolist()
+    if any(entry['used'] for entry in out) and _adjust(rec, refine_focal=False, refine_extra=False):
+        rec.write(str(sparse_dir))
+    else:
+        for entry in out:
+            entry['used'] = False
     return out
 
 

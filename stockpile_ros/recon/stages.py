@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -32,6 +33,7 @@ from ..artefacts import (
 from ..errors import CaptureError, StockpileError
 from ..meshio import LabelledMesh, write_labelled_mesh
 from ..progress import progress
+from .calibration import planar_views
 from .collector import KeyframeCollector
 from .dense import run_dense
 from .exif import read_intrinsics
@@ -39,8 +41,9 @@ from .gates import registration_gate
 from .ground import fit_ground, pile_mask, stockpile_transform
 from .keyframes import KeyframeStore
 from .options import ReconOptions
+from .scale import MarkerSpec, detect_markers
 from .scaling import estimate_scale, on_path
-from .sfm import SparseModel, load_sparse, run_sfm
+from .sfm import SparseModel, load_sparse, pin_focal, run_sfm
 from .sources import iter_frames, photo_files, source_kind
 from .surface import poisson_surface
 
@@ -108,6 +111,24 @@ def photo_names(work: WorkFolder) -> dict[str, str]:
     return {p['keyframe']: p['file'] for p in photos if p['keyframe']}
 
 
+def _pin_focal_to_targets(
+    work: WorkFolder, store: KeyframeStore, options: ReconOptions
+) -> list[dict[str, Any]]:
+    """Measure a self-calibrated focal length on the targets' views and hold the model to it.
+
+    See :mod:`.calibration` and :func:`.sfm.pin_focal`.
+    """
+    registered = set(load_sparse(work.sparse).views)
+    dictionaries = [t.dictionary for t in options.target if isinstance(t, MarkerSpec)]
+    planes = {}
+    for record in store.records:
+        if record.file in registered:
+            image = store.image(record)
+            markers = detect_markers(image, dictionaries) if dictionaries else {}
+            planes[record.file] = planar_views(image, markers, options.target)
+    return pin_focal(work.sparse, planes)
+
+
 def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> SparseSummary:
     """Structure-from-Motion of the stored keyframes into ``work.sparse``, then the gate.
 
@@ -138,6 +159,12 @@ def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> SparseSummary:
         for entry in report.model_images:
             entry.photos = [names.get(n, n) for n in entry.images]
         report.unregistered_photos = [names.get(n, n) for n in report.unregistered]
+    if options.target and not report.camera.startswith('fixed'):
+        report.target_focal = _pin_focal_to_targets(work, store, options)
+        used = [entry for entry in report.target_focal if entry['used']]
+        if used:
+            views = sum(entry['views'] for entry in used)
+            report.camera += f'; focal length from the targets ({views} views), held'
     model = load_sparse(work.sparse)
     gate = registration_gate(
         [r.file for r in store.records],
