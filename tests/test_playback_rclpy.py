@@ -175,8 +175,11 @@ def test_qos_profile_follows_the_table() -> None:
     stream = qos_profile(topics.topic(topics.KEYFRAMES).qos)
     assert stream.history == HistoryPolicy.KEEP_ALL
     assert stream.durability == DurabilityPolicy.TRANSIENT_LOCAL
-    latched = qos_profile(topics.topic(topics.STATUS).qos)
+    latched = qos_profile(topics.topic(topics.ROCKS).qos)
     assert latched.depth == 1 and latched.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    status = qos_profile(topics.topic(topics.STATUS).qos)
+    assert status.depth == 10 and status.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert status.reliability == ReliabilityPolicy.RELIABLE
 
 
 def test_player_publishes_every_message_of_a_bag_into_a_live_node(
