@@ -35,6 +35,11 @@ MIN_VIEWS = 6
 #: Largest jackknife uncertainty of the focal length that is used.
 MAX_REL_UNCERTAINTY = 0.01
 
+#: Least median tilt of the target planes against the optical axes [deg]: seen face on, a plane's
+#: homography does not tell the focal length from the distance (the calibration would return its
+#: starting guess with no spread at all).
+MIN_TILT_DEG = 20.0
+
 #: Fewest ChArUco corners a view of a board needs.
 _MIN_BOARD_CORNERS = 6
 
@@ -91,8 +96,8 @@ def planar_views(
 
 def _calibrate(
     views: Sequence[PlanarView], camera: CameraModel
-) -> tuple[float, float, float] | None:
-    """Focal length, k1 and RMS reprojection error, the principal point and aspect held."""
+) -> tuple[float, float, float, float] | None:
+    """Focal length, k1, RMS error [px] and median plane tilt [deg]; principal point held."""
     flags = (
         cv2.CALIB_USE_INTRINSIC_GUESS
         | cv2.CALIB_FIX_PRINCIPAL_POINT
@@ -105,7 +110,7 @@ def _calibrate(
     dist[0] = camera.d[0] if len(camera.d) else 0.0
     k = np.array(camera.k, dtype=np.float64)
     try:
-        rms, k_out, d_out, _, _ = cv2.calibrateCamera(
+        rms, k_out, d_out, rvecs, _ = cv2.calibrateCamera(
             [o.astype(np.float32) for o, _ in views],
             [p.astype(np.float32).reshape(-1, 1, 2) for _, p in views],
             (camera.width, camera.height),
@@ -118,7 +123,9 @@ def _calibrate(
     focal, k1 = float(k_out[0, 0]), float(np.ravel(d_out)[0])
     if not (math.isfinite(focal) and focal > 0 and math.isfinite(k1)):
         return None
-    return focal, k1, float(rms)
+    normals_z = [abs(float(cv2.Rodrigues(r)[0][2, 2])) for r in rvecs]
+    tilt = math.degrees(math.acos(min(1.0, float(np.median(normals_z)))))
+    return focal, k1, float(rms), tilt
 
 
 def target_focal(views: Sequence[PlanarView], camera: CameraModel) -> TargetFocal | None:
@@ -131,8 +138,8 @@ def target_focal(views: Sequence[PlanarView], camera: CameraModel) -> TargetFoca
 
     Returns:
         The focal length and its jackknife uncertainty; None for fewer than ``MIN_VIEWS``
-        views, a failed calibration, or an uncertainty above ``MAX_REL_UNCERTAINTY`` (views too
-        nearly face on, where the focal length is not observable).
+        views, a failed calibration, planes seen nearly face on (a median tilt under
+        ``MIN_TILT_DEG``) or an uncertainty above ``MAX_REL_UNCERTAINTY``.
 
     """
     if len(views) < MIN_VIEWS:
@@ -140,7 +147,9 @@ def target_focal(views: Sequence[PlanarView], camera: CameraModel) -> TargetFoca
     full = _calibrate(views, camera)
     if full is None:
         return None
-    focal, k1, rms = full
+    focal, k1, rms, tilt = full
+    if tilt < MIN_TILT_DEG:
+        return None
     left_out = [_calibrate([v for k, v in enumerate(views) if k != i], camera)
                 for i in range(len(views))]  # fmt: skip
     values = np.array([x[0] for x in left_out if x is not None], dtype=np.float64)
