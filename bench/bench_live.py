@@ -65,7 +65,7 @@ def _live(bag: Path, work: Path, params: dict[str, Any], split: bool) -> dict[st
     procs = [rig(role, folder, params) for role, folder in roles]
     rclpy.init()
     recorder = Recorder('stockpile_bench_recorder')
-    executor, _ = spin(recorder)
+    executor, thread = spin(recorder)
     try:
         play(bag)
         if not trigger(recorder).success:
@@ -82,6 +82,7 @@ def _live(bag: Path, work: Path, params: dict[str, Any], split: bool) -> dict[st
         }
     finally:
         executor.shutdown()
+        thread.join(5)
         recorder.destroy_node()
         rclpy.try_shutdown()
         for proc in procs:

@@ -34,11 +34,12 @@ class Recorder(Node):
         self.lock = threading.Lock()
         self.got: list[tuple[str, Any, float]] = []  # topic, message, time.monotonic()
         for entry in OUTPUTS:
-            # Reliability and durability as the table says, but every sample kept until its
-            # callback runs: with the table's depth of 1 for latched topics, two statuses in quick
-            # succession on a loaded machine left only the second one.
+            # Reliability and durability as the table says, but a deep history: with the table's
+            # depth of 1 for latched topics, two samples in quick succession on a loaded machine
+            # left only the second one.
             profile = qos_profile(entry.qos)
-            profile.history = HistoryPolicy.KEEP_ALL
+            if profile.history == HistoryPolicy.KEEP_LAST:
+                profile.depth = max(profile.depth, 100)
             self.create_subscription(get_message(entry.msgtype), entry.name,
                                      self._keep(entry.name), profile)  # fmt: skip
 

@@ -139,7 +139,7 @@ def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
 ) -> None:
     cart, base = rig('cart', tmp_path / 'cart', PARAMS), rig('base', tmp_path / 'base', PARAMS)
     recorder = Recorder()
-    executor, _ = spin(recorder)
+    executor, thread = spin(recorder)
     try:
         play(bag)
         assert trigger(recorder).success
@@ -155,6 +155,7 @@ def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
         assert not (tmp_path / 'base' / 'capture').exists()
     finally:
         executor.shutdown()
+        thread.join(5)
         recorder.destroy_node()
         for proc in (cart, base):
             proc.send_signal(signal.SIGINT)
@@ -162,3 +163,4 @@ def test_cart_and_base_station_in_two_processes_match_replay_and_exit_cleanly(
         for name, proc in (('cart', cart), ('base', base)):
             (tmp_path / f'{name}.log').write_text(proc.stdout.read() if proc.stdout else '')
     assert codes == [0, 0], f'exit codes {codes}: see {tmp_path}/cart.log and base.log'
+    assert not thread.is_alive()
