@@ -57,7 +57,9 @@ def make_report(
 ) -> Report:
     """A report of the given rocks, as a result folder's ``report.json`` holds one.
 
-    Its gradation is of no rock but for ``d50``; its segmentation and mesh are placeholders.
+    Its gradation is that of no rock but for ``d50``, and its segmentation and mesh records hold
+    fixed small values: the tests it feeds (evaluation, capture warnings) read rocks, scale and
+    warnings.
     """
     gradation = grade([], None, scale.rel_uncertainty, ReportOptions(resamples=100), scale.metric)
     segmentation = SegmentationRecord(

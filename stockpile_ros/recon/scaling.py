@@ -168,7 +168,7 @@ def _target_scale(
         ]
         replicates = resampled_poses(work.sparse, refine_intrinsics=not (fixed or pinned))
         spread = replicate_spread(poses, replicates, pooled_scale)
-        focal = max(pinned) if pinned else None if sparse is None else sparse.focal_rel_uncertainty
+        focal = max(pinned) if pinned else (sparse.focal_rel_uncertainty if sparse else None)
         parts = {'model': spread} if spread is not None else {}
         if focal is not None and (pinned or spread is None):
             parts['focal'] = focal

@@ -112,13 +112,13 @@ def photo_names(work: WorkFolder) -> dict[str, str]:
 
 
 def _pin_focal_to_targets(
-    work: WorkFolder, store: KeyframeStore, options: ReconOptions
+    work: WorkFolder, store: KeyframeStore, options: ReconOptions, registered: set[str]
 ) -> list[dict[str, Any]]:
     """Measure a self-calibrated focal length on the targets' views and hold the model to it.
 
-    See :mod:`.calibration` and :func:`.sfm.pin_focal`.
+    Only the ``registered`` keyframes (the model kept) are read. See :mod:`.calibration` and
+    :func:`.sfm.pin_focal`.
     """
-    registered = set(load_sparse(work.sparse).views)
     dictionaries = [t.dictionary for t in options.target if isinstance(t, MarkerSpec)]
     planes = {}
     for record in store.records:
@@ -160,7 +160,8 @@ def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> SparseSummary:
             entry.photos = [names.get(n, n) for n in entry.images]
         report.unregistered_photos = [names.get(n, n) for n in report.unregistered]
     if options.target and not report.camera.startswith('fixed'):
-        report.target_focal = _pin_focal_to_targets(work, store, options)
+        registered = set(report.model_images[0].images) if report.model_images else set()
+        report.target_focal = _pin_focal_to_targets(work, store, options, registered)
         used = [entry for entry in report.target_focal if entry['used']]
         if used:
             views = sum(entry['views'] for entry in used)

@@ -264,9 +264,10 @@ def _text_block(fig: Any, y: float, lines: list[str], size: float = 8.5) -> floa
     return y - 0.006
 
 
-# Width of a DejaVu Sans Mono character over its size, and the page's printable width [pt].
+# Width of a DejaVu Sans Mono character over its size, the page [in] and its printable width [pt].
 _MONO_ADVANCE = 0.602
-_TABLE_WIDTH_PT = 0.88 * 8.27 * 72
+_A4 = (8.27, 11.69)
+_TABLE_WIDTH_PT = 0.88 * _A4[0] * 72
 
 
 def _table(fig: Any, y: float, header: list[str], rows: list[list[str]], height: float) -> float:
@@ -308,11 +309,10 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
     from matplotlib.figure import Figure
     from matplotlib.image import imread
 
-    a4 = (8.27, 11.69)
     p: ProvenanceRecord = context['p']
     spec: ClassDecision = context['spec']
     with PdfPages(path) as pdf:
-        fig = Figure(figsize=a4)
+        fig = Figure(figsize=_A4)
         fig.text(
             0.06,
             0.965,
@@ -414,7 +414,7 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
             fontsize=9,
         )
         pdf.savefig(fig)
-        fig = Figure(figsize=a4)
+        fig = Figure(figsize=_A4)
         fig.text(
             0.06, 0.965, 'Segmented pile and keyframe photo', fontsize=13, weight='bold', va='top'
         )
@@ -455,7 +455,7 @@ def write_pdf(path: Path, context: Mapping[str, Any], images: Mapping[str, bytes
         per_page = 48
         rocks = context['rock_rows']
         for start in range(0, max(len(rocks), 1), per_page):
-            fig = Figure(figsize=a4)
+            fig = Figure(figsize=_A4)
             fig.text(0.06, 0.965, 'Rocks', fontsize=13, weight='bold', va='top')
             y = _text_block(fig, 0.94, [context['rock_note']], 7.5)
             chunk = [r['cells'] for r in rocks[start : start + per_page]]
