@@ -131,6 +131,23 @@ def test_exif_focal_and_sensor_table(photos: tuple[Path, dict[str, np.ndarray]])
     assert sensor_width('Apple', 'iPhone 15') is None
 
 
+def test_a_blurred_photo_is_left_out_and_a_plain_view_is_not(
+    photos: tuple[Path, dict[str, np.ndarray]], tmp_path: Path
+) -> None:
+    folder, _ = photos
+    copy = tmp_path / 'photos'
+    copy.mkdir()
+    names = sorted(p.name for p in folder.glob('*.jpg'))[:6]
+    for name in names:
+        (copy / name).write_bytes((folder / name).read_bytes())
+    # A copy of the last photo shaken by about 1.5 px, named to come last.
+    image = np.asarray(Image.open(folder / names[-1]))
+    Image.fromarray(cv2.GaussianBlur(image, (0, 0), 1.5)).save(copy / 'IMG_9999.jpg', quality=92)
+    # The photos of a walk differ in sharpness by what they show; only the blurred one goes.
+    counts = run_keyframes(copy, WorkFolder(tmp_path / 'work'), build_settings({}).recon)
+    assert counts.keyframes == 6 and counts.decisions.get('blurred') == 1
+
+
 def test_unordered_photos_register_and_scale_from_one_marker(
     photos: tuple[Path, dict[str, np.ndarray]], tmp_path: Path
 ) -> None:

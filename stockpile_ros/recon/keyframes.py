@@ -51,7 +51,8 @@ class SelectorOptions:
 
     Attributes:
         work_width: Width [px] of the grey copy every test runs on.
-        blur_ratio: A frame is blurred when its sharpness is below this share of the reference.
+        blur_ratio: A frame is blurred when its sharpness is below this share of the reference
+            (a photo of a set: below ``PHOTO_BLUR_SHARE`` of it, see ``run_keyframes``).
         reference_frames: Number of recent frames whose median sharpness is the reference. Short
             enough for the reference to follow the scene: where a pass leaves the pile for plain
             ground, sharpness falls by 40 % within a second, and a 31-frame reference took 28
