@@ -65,6 +65,8 @@ def test_hand_back_splits_a_band_where_the_fronts_meet() -> None:
     labels = np.array([1] + [0] * 8 + [2], dtype=np.int32)
     free = np.array([False] + [True] * 8 + [False])
     assert hand_back(labels, adj, free).tolist() == [1] * 5 + [2] * 5
+    # Fronts that stop after two rings leave the middle of the band to no region.
+    assert hand_back(labels, adj, free, rings=2).tolist() == [1] * 3 + [0] * 4 + [2] * 3
 
 
 def test_the_search_stops_at_a_rounded_crease() -> None:
@@ -75,7 +77,8 @@ def test_the_search_stops_at_a_rounded_crease() -> None:
     tops = [np.argmin(np.linalg.norm(xy - [x, 0.0], axis=1)) for x in (-0.045, 0.045)]
     assert seg.labels[tops[0]] != seg.labels[tops[1]]
     assert min(seg.labels[tops]) > 0
-    # Valley faces went back to the domes: all that is left unlabelled is ground.
+    # Valley faces went back to the domes (the crease is within a valley radius of both): all
+    # that is left unlabelled is ground.
     ground = SegmentParams().ground_tolerance_edges * seg.scale.edge
     assert np.all(seg.geometry.centroids[seg.labels == 0, 2] < ground)
     # Without the valley test the face-to-face criterion alone breaks the same mesh into pieces.

@@ -34,23 +34,29 @@ BORDER_SAMPLES = 256
 HULL_SAMPLES = 2000
 
 
-def hand_back(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
+def hand_back(
+    labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_], rings: int | None = None
+) -> I32:
     """Give unlabelled ``free`` faces the label of a labelled neighbour, front by front.
 
     Every round each free face next to a labelled face takes its label, so a band between two
-    regions is split where the fronts from both sides meet.
+    regions is split where the fronts from both sides meet. With ``rings``, the fronts stop after
+    that many rounds and the free faces they did not reach stay unlabelled.
     """
     labels = labels.copy()
     src, dst = adj.src, adj.dst
     open_edge = free[dst] & (labels[dst] == 0)
     src, dst = src[open_edge], dst[open_edge]
-    while True:
+    done = 0
+    while rings is None or done < rings:
         take = labels[src] > 0
         if not take.any():
-            return labels
+            break
         labels[dst[take]] = labels[src[take]]
         left = labels[dst] == 0
         src, dst = src[left], dst[left]
+        done += 1
+    return labels
 
 
 def merge_fragments(

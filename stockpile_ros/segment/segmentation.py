@@ -15,13 +15,14 @@ Two presets of :class:`SegmentParams`:
   creases, and a looser test merges touching rocks); seeds from the most convex faces; every
   region smaller than a share of the smallest rock of interest is a fragment and is merged into
   the neighbouring region it shares the longest border with; the valley faces are handed back to
-  the regions they border, growing from both sides of a valley until they meet; a region that
-  faces down and borders only ground is dropped (an underside cut off from its rock); then
-  neighbouring regions whose union stays convex across their shared border are joined (on
-  reconstructed piles, noise stops the search inside single rocks: this took precision from 0.38
-  to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``); last, a region
-  that a wider valley cuts into two or more large parts is split into them (two touching rocks
-  that the search joined through a gap in the narrower valley, see ``split_at_valleys``).
+  the regions they border, growing from both sides of a valley until they meet (those farther
+  than about a valley radius from every region stay out of every rock, see ``valley_reach``); a
+  region that faces down and borders only ground is dropped (an underside cut off from its
+  rock); then neighbouring regions whose union stays convex across their shared border are
+  joined (on reconstructed piles, noise stops the search inside single rocks: this took precision
+  from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``); last, a
+  region that a wider valley cuts into two or more large parts is split into them (two touching
+  rocks that the search joined through a gap in the narrower valley, see ``split_at_valleys``).
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
@@ -41,6 +42,7 @@ class, say) keeps the larger scales; :attr:`RockScale.requested` records what wa
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -51,7 +53,7 @@ import numpy.typing as npt
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .cleanup import drop_facing_down, hand_back, merge_convex_borders, merge_fragments
 from .criterion import edge_scores
-from .params import RockScale, SegmentParams, median_edge, rock_scale
+from .params import RINGS_PER_EDGE, RockScale, SegmentParams, median_edge, rock_scale
 from .region import grow_regions
 from .valleys import smooth_normals, split_at_valleys, valley_depths
 
@@ -172,7 +174,11 @@ def segment_mesh(
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
     if min_area > 0:
         labels = merge_fragments(labels, search, geom.areas, min_area, p.merge_fragments)
+    far = np.zeros(m, dtype=bool)
     if valley.any():
+        if p.valley_reach > 0:
+            rings = math.ceil(RINGS_PER_EDGE * p.valley_reach * valley_radius / edge)
+            far = valley & (hand_back(labels, adj, valley, rings) == 0)
         labels = hand_back(labels, adj, valley)
         search = adj
     if p.drop_facing_down:
@@ -186,4 +192,7 @@ def segment_mesh(
     if p.split_depth_ratio > 0 and depths:
         deep = depths[-1] > p.split_depth_ratio * split_radius
         labels = split_at_valleys(labels, adj, geom.areas, deep, p.split_min_share)
+    # Every valley face is handed back first, so that the regions border each other along the
+    # valleys' middles where the clean-ups look; the far ones are then left out of every rock.
+    labels = np.where(far, 0, labels).astype(np.int32)
     return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale)
