@@ -177,8 +177,10 @@ def segment_mesh(
     far = np.zeros(m, dtype=bool)
     if valley.any():
         if p.valley_reach > 0:
+            # The fronts go on from where they stopped: the same labels as in one go.
             rings = math.ceil(RINGS_PER_EDGE * p.valley_reach * valley_radius / edge)
-            far = valley & (hand_back(labels, adj, valley, rings) == 0)
+            labels = hand_back(labels, adj, valley, rings)
+            far = valley & (labels == 0)
         labels = hand_back(labels, adj, valley)
         search = adj
     if p.drop_facing_down:
