@@ -78,6 +78,21 @@ def test_parallax_decides_between_frames() -> None:
     assert not sel.push(_view(tex, 50)).accepted
 
 
+def test_corners_tracked_into_unrelated_noise_are_lost() -> None:
+    # LK converges somewhere even between unrelated frames (here independent pixel noise, where
+    # it still reported 83-100 % of the corners found): those corners are lost, so the frame has
+    # no viewing angle and the keyframe's corners count as gone.
+    rng = np.random.default_rng(0)
+    sel = KeyframeSelector(SelectorOptions(min_spacing=1, max_spacing=0))
+    noise = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    sel.push(noise)
+    same = sel.push(np.roll(noise, 3, axis=1))
+    assert same.tracked > 0.9 and np.isfinite(same.view_angle)
+    other = sel.push(rng.integers(0, 256, (240, 320, 3), dtype=np.uint8))
+    assert other.tracked < 0.1 and np.isnan(other.view_angle)
+    assert other.accepted and other.reason == 'coverage'
+
+
 def test_spacing_and_bound() -> None:
     tex = _texture(2)
     # The viewing-angle bound, which may take a frame within min_spacing, out of the way.
