@@ -1,9 +1,10 @@
 """Keyframe selection from a camera stream: sharp frames that add viewpoint, written as accepted.
 
 The selector works on a small grey copy of each frame (about 320 px wide) so that it keeps up with a
-30 fps stream on one core: sharpness is the variance of the Laplacian compared with a running
-reference (the median of recent frames); corners are tracked with pyramidal Lucas-Kanade from the
-last keyframe, and two measures come from them:
+camera stream on one core (without poses the fit of the views' motion makes it 34-39 ms a frame,
+about 25 fps, in bench/bench_view_angle.py): sharpness is the variance of the Laplacian compared
+with a running reference (the median of recent frames); corners are tracked with pyramidal
+Lucas-Kanade from the last keyframe, and two measures come from them:
 
 - parallax, the median displacement in the image as a share of its width;
 - the viewing angle, the median over tracked corners of the angle between the two rays that see
