@@ -221,6 +221,10 @@ def test_held_out_walk_scale_within_its_stated_spread(tmp_path: Path) -> None:
     assert pinned['used'] and pinned['views'] >= 12
     assert abs(pinned['focal_px'] / CAM.fx - 1) <= 0.005, pinned
     assert 'focal length from the targets' in sparse.camera
+    # sparse.json lists the camera the model holds, not the self-calibrated one before it.
+    (camera,) = sparse.cameras
+    assert camera['params'][0] == pytest.approx(pinned['focal_px'])
+    assert camera['params'][0] != pytest.approx(pinned['sfm_focal_px'], rel=1e-6)
     truth = {name: walk.centre(t) for name, t in where.items()}
     registered, scale, error = _scale_error(work, truth, photo_names(work))
     assert registered == 16

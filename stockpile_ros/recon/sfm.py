@@ -35,6 +35,7 @@ __all__ = [
     'View',
     'focal_uncertainty',
     'load_sparse',
+    'model_figures',
     'pin_focal',
     'resampled_poses',
     'run_sfm',
@@ -500,6 +501,16 @@ def _camera_report(camera: pycolmap.Camera) -> dict[str, Any]:
         'params': [float(v) for v in camera.params],
         'prior_focal_length': bool(camera.has_prior_focal_length),
     }
+
+
+def model_figures(sparse_dir: Path) -> tuple[list[dict[str, Any]], float]:
+    """Return the cameras (as ``sparse.json`` lists them) and mean reprojection error [px].
+
+    For the summary of a model adjusted again after :func:`run_sfm` (see :func:`pin_focal`).
+    """
+    rec = pycolmap.Reconstruction(str(sparse_dir))
+    cameras = [_camera_report(cam) for cam in rec.cameras.values()]
+    return cameras, float(rec.compute_mean_reprojection_error())
 
 
 def focal_uncertainty(rec: pycolmap.Reconstruction) -> float | None:

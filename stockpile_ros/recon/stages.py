@@ -43,7 +43,7 @@ from .keyframes import KeyframeStore
 from .options import ReconOptions
 from .scale import MarkerSpec, detect_markers
 from .scaling import estimate_scale, on_path
-from .sfm import SparseModel, load_sparse, pin_focal, run_sfm
+from .sfm import SparseModel, load_sparse, model_figures, pin_focal, run_sfm
 from .sources import iter_frames, photo_files, source_kind
 from .surface import poisson_surface
 
@@ -185,6 +185,8 @@ def run_sfm_stage(work: WorkFolder, options: ReconOptions) -> SparseSummary:
         if used:
             views = sum(entry['views'] for entry in used)
             report.camera += f'; focal length from the targets ({views} views), held'
+            # The model was adjusted again with them: its cameras, not the self-calibrated ones.
+            report.cameras, report.mean_reprojection_error_px = model_figures(work.sparse)
     model = load_sparse(work.sparse)
     gate = registration_gate(
         [r.file for r in store.records],
