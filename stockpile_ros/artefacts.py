@@ -151,7 +151,8 @@ class KeyframeRecord:
         camera: Camera model from CameraInfo, None when the source has none.
         odometry: Odometry pose at the stamp, None without odometry.
         reason: Why it was kept.
-        sharpness: Variance of the Laplacian on the working copy.
+        sharpness: Variance of the Laplacian on the levelled working copy (see
+            :mod:`.recon.keyframes`).
         extra: Keys a later writer added, kept as they are.
 
     """

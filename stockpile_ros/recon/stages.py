@@ -81,9 +81,10 @@ def run_keyframes(source: Path, work: WorkFolder, options: ReconOptions) -> Keyf
     selector_options = options.selector
     if kind == 'photos':
         # Photos were taken on purpose: keep every sharp one. Unlike a video's frames, the photos
-        # before one show other views, whose sharpness differs by content: on a simulated walk of
-        # 16 photos from 0.58 to 1.34 of their median, while a Gaussian blur of 1 px took every
-        # one under 0.30 (0.05 at 2 px). The blur test's share is halved for them.
+        # before one show other views, whose sharpness differs by content: on the simulated walks
+        # of tests/test_photos.py from 0.61 to 1.42 of their median (0.62-1.39 of the photos'
+        # before each), while a Gaussian blur of 1.5 px took every one under 0.15 (1 px: 0.35,
+        # 2 px: 0.07). The blur test's share is halved for them.
         selector_options = replace(
             selector_options,
             min_spacing=1,
