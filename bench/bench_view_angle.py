@@ -21,13 +21,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
 
 from stockpile_ros.camera import CameraModel
 from stockpile_ros.recon.keyframes import KeyframeSelector, SelectorOptions
 
 sys.path.insert(0, str(Path(__file__).parents[1] / 'tests'))
-from recon_synth import look_at, render, scene_mesh
+from recon_synth import look_at, render, scene_mesh, seen_points, viewing_angle
 
 SIZE = (640, 480)
 # (seed, orbit radius [m], camera height [m]) of the three scenes.
@@ -37,13 +36,9 @@ SCENES = ((0, 1.6, 2.0), (1, 2.2, 1.2), (2, 1.2, 1.6))
 def sequences() -> list[tuple[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]]:
     """Rendered (image, centre, scene points seen) sequences: one orbit and one line a scene."""
     cam = CameraModel.from_fov(SIZE[0], SIZE[1], 70.0)
-    u, v = np.meshgrid(np.linspace(0, SIZE[0] - 1, 16), np.linspace(0, SIZE[1] - 1, 12))
-    pixels = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
     out = []
     for seed, radius, height in SCENES:
         mesh = scene_mesh(seed=seed)
-        cast = o3d.t.geometry.RaycastingScene()
-        cast.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
         orbit = [
             (np.array([radius * np.cos(a), radius * np.sin(a), height]), np.zeros(3))
             for a in np.radians(np.arange(0.0, 31.0, 3.0))
@@ -56,26 +51,10 @@ def sequences() -> list[tuple[str, list[tuple[np.ndarray, np.ndarray, np.ndarray
             seq = []
             for centre, target in poses:
                 rot, trans = look_at(centre, target)
-                dirs = pixels @ np.linalg.inv(cam.k).T @ rot
-                rays = np.hstack([np.broadcast_to(centre, dirs.shape), dirs]).astype(np.float32)
-                hit = cast.cast_rays(o3d.core.Tensor(rays))['t_hit'].numpy()
-                ok = np.isfinite(hit)
-                seq.append(
-                    (
-                        render(mesh, cam.k, SIZE, rot, trans),
-                        centre,
-                        centre + dirs[ok] * hit[ok, None],
-                    )
-                )
+                image = render(mesh, cam.k, SIZE, rot, trans)
+                seq.append((image, centre, seen_points(mesh, cam.k, SIZE, rot, centre)))
             out.append((name, seq))
     return out
-
-
-def true_angle(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    """Median over ``points`` of the angle [deg] between the rays from centres ``a`` and ``b``."""
-    ra, rb = points - a, points - b
-    cos = np.sum(ra * rb, axis=1) / np.linalg.norm(ra, axis=1) / np.linalg.norm(rb, axis=1)
-    return float(np.degrees(np.median(np.arccos(np.clip(cos, -1.0, 1.0)))))
 
 
 def main() -> None:
@@ -96,7 +75,7 @@ def main() -> None:
                 for first in (0, 3):
                     image0, centre0, points0 = seq[first]
                     for image, centre, _ in seq[first + 1 :]:
-                        truth = true_angle(points0, centre0, centre)
+                        truth = viewing_angle(points0, centre0, centre)
                         if truth < 2.0:
                             continue
                         sel = KeyframeSelector(options)

@@ -54,6 +54,29 @@ def look_at(centre: F64, target: F64) -> tuple[F64, F64]:
     return rot, -rot @ centre
 
 
+def seen_points(
+    mesh: o3d.geometry.TriangleMesh, k: F64, size: tuple[int, int], rot: F64, centre: F64
+) -> F64:
+    """Scene points under a 16 x 12 grid of pixels of a view (the corners a selector tracks)."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    u, v = np.meshgrid(np.linspace(0, size[0] - 1, 16), np.linspace(0, size[1] - 1, 12))
+    pixels = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+    dirs = pixels @ np.linalg.inv(k).T @ rot
+    rays = np.hstack([np.broadcast_to(centre, dirs.shape), dirs]).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor(rays))['t_hit'].numpy()
+    ok = np.isfinite(hit)
+    return np.asarray(centre + dirs[ok] * hit[ok, None], dtype=np.float64)
+
+
+def viewing_angle(points: F64, a: F64, b: F64) -> float:
+    """Median over ``points`` of the angle [deg] between the rays from centres ``a`` and ``b``."""
+    ray_a, ray_b = points - a, points - b
+    cos = np.sum(ray_a * ray_b, axis=1)
+    cos /= np.linalg.norm(ray_a, axis=1) * np.linalg.norm(ray_b, axis=1)
+    return float(np.degrees(np.median(np.arccos(np.clip(cos, -1.0, 1.0)))))
+
+
 def orbit(n: int, radius: float = 2.2, height: float = 1.3, arc: float = 1.2) -> list[F64]:
     """Camera centres on an arc (radians) around the origin."""
     angles = np.linspace(-arc / 2, arc / 2, n)

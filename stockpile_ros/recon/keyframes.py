@@ -85,9 +85,9 @@ class SelectorOptions:
             a slow pass still gets keyframes (0 disables).
         max_keyframes: Upper bound on the number of keyframes.
         max_corners: Corners tracked from each keyframe. The image-only viewing angle needs
-            many: on the orbits of ``bench/bench_view_angle.py`` the tenth percentile of its
-            ratio to the true angle was 0.40-0.43 at 100 corners, 0.61-0.76 at 200, 0.72-0.78 at
-            300 and 0.73-0.80 at 500 (9 ms a frame more than 300).
+            many, not too many: on the orbits of ``bench/bench_view_angle.py`` the tenth
+            percentile of its ratio to the true angle was 0.30-0.42 at 100 corners, 0.69-0.75 at
+            200, 0.71-0.78 at 300 and 0.44-0.62 at 500 (weaker corners, worse tracks).
 
     """
 
@@ -161,8 +161,8 @@ def _levelled(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
 
     Sharpness and tracking on it are unchanged by a change of exposure (a gain and an offset over
     the frame). Lucas-Kanade assumes constant brightness: 30 % more gain between a keyframe and a
-    frame of a simulated pass lost 35 % of the corners, and, since lost tracks are told by their
-    residual, 64 % before this. The variance of the Laplacian grows with the square of the
+    frame of a simulated pass lost 35 % of the corners, 64 % once lost tracks are told by their
+    residual. The variance of the Laplacian grows with the square of the
     contrast: 40 % darker, the photos of tests/test_photos.py's walks read 0.23-0.47 of their
     median, as blurred as a 1 px Gaussian blur makes them (0.28-0.31); levelled, 0.61-1.44, and
     the 1 px blur 0.34-0.35.
@@ -274,7 +274,8 @@ def _fit_motion(
         )
         if essential is None or essential.shape[0] < 3 or mask is None:
             continue
-        for e in np.split(essential[: essential.shape[0] // 3 * 3], essential.shape[0] // 3):
+        # Up to ten solutions stacked as 3x3 blocks: each starts a refinement.
+        for e in essential.reshape(-1, 3, 3):
             _, turn, moved, _ = cv2.recoverPose(e, q1, q2, np.eye(3), mask=mask.copy())
             start, _ = cv2.Rodrigues(turn)
             fit = least_squares(
