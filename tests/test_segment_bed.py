@@ -106,3 +106,25 @@ def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
     assert resolved.precision >= 0.45
     assert resolved.b_error <= 0.12
     assert abs(resolved.d50_error) <= 0.35
+
+
+def test_relief_roughens_the_ground_as_dense_matching_does() -> None:
+    # Point noise alone is averaged away by Poisson; a relief correlated over cells is not.
+    cell = SMALLEST / 4
+
+    def ground_heights(surface: BedSurface) -> np.ndarray:
+        centres = surface.vertices[surface.faces].mean(axis=1)
+        rocks = np.concatenate([r.mesh.vertices for r in _bed()])
+        # The strip of open ground the survey saw round the rocks (it reaches a smallest b out).
+        lo, hi = rocks[:, :2].min(axis=0), rocks[:, :2].max(axis=0)
+        gap = np.maximum(lo - centres[:, :2], centres[:, :2] - hi).max(axis=1)
+        strip = (gap > 0.3 * SMALLEST) & (gap < 0.7 * SMALLEST)
+        return centres[strip & (surface.labels == 0), 2]
+
+    plain = ground_heights(bed_surface(_bed(), cell, np.random.default_rng(2), noise_cells=0.2))
+    rough = bed_surface(_bed(), cell, np.random.default_rng(2), noise_cells=0.2, relief_cells=0.3)
+    heights = ground_heights(rough)
+    assert len(plain) > 300 and len(heights) > 300
+    # Measured when written: 0.04 and 0.22 cells.
+    assert plain.std() < 0.08 * cell
+    assert 0.15 * cell < heights.std() < 0.35 * cell

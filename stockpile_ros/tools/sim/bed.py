@@ -16,10 +16,11 @@ into hollows), and each rock then sinks a random share of its height into what l
 so the bed is more than one layer thick and nothing of the ground shows inside it.
 
 The surface is what a survey from above reconstructs: points where rays from straight above and
-from four oblique directions first hit a rock or the ground, with noise along their normals of
-a share of the cell, meshed by screened Poisson at a chosen finest cell (it rounds the creases
-between rocks over a few cells and bridges what no ray saw, as on a reconstructed pile); each
-face takes the label of the nearest point.
+from four oblique directions first hit a rock or the ground, displaced along their normals by a
+smooth relief correlated over a few cells (dense matching's errors are, and Poisson does not
+average them away) and by white noise of a share of the cell, meshed by screened Poisson at a
+chosen finest cell (it rounds the creases between rocks over a few cells and bridges what no ray
+saw, as on a reconstructed pile); each face takes the label of the nearest point.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import open3d as o3d
+from scipy.ndimage import gaussian_filter, map_coordinates
 from scipy.spatial import cKDTree
 
 from ...errors import StockpileError
@@ -201,12 +203,38 @@ def _survey(
         )
 
 
+def _relief_field(points: F64, length: float, rng: np.random.Generator) -> tuple[F64, F64]:
+    """Return a smooth random field of unit standard deviation at ``points``, and its gradient.
+
+    White noise on a lattice of ``length / 2``, blurred by one lattice step (so its correlation
+    length is about ``length``), normalised, and read off trilinearly; the gradient by central
+    differences a quarter of ``length`` apart.
+    """
+    step = length / 2.0
+    origin = points.min(axis=0) - 2.0 * step
+    shape = tuple(int(n) for n in np.ceil((points.max(axis=0) + 2.0 * step - origin) / step) + 1)
+    grid = gaussian_filter(rng.standard_normal(shape, dtype=np.float32), 1.0, mode='wrap')
+    grid /= grid.std()
+
+    def at(q: F64) -> F64:
+        read: F64 = map_coordinates(grid, ((q - origin) / step).T, order=1, mode='nearest')
+        return read.astype(np.float64)
+
+    h = length / 4.0
+    gradient = np.column_stack(
+        [(at(points + h * e) - at(points - h * e)) / (2.0 * h) for e in np.eye(3)]
+    )
+    return at(points), gradient
+
+
 def bed_surface(
     rocks: list[PlacedRock],
     cell: float,
     rng: np.random.Generator,
     noise_cells: float = 0.0,
     trim_quantile: float = 0.02,
+    relief_cells: float = 0.0,
+    relief_length_cells: float = 3.0,
 ) -> BedSurface:
     """Survey ``rocks`` (and the ground round them) from above and mesh what was seen by Poisson.
 
@@ -221,9 +249,14 @@ def bed_surface(
         rocks: The rocks of a bed or pile.
         cell: Finest Poisson cell [m] (about the median edge of the mesh).
         rng: Random generator (ray jitter and noise).
-        noise_cells: Standard deviation of the noise of the points along their normals [in
-            ``cell``].
+        noise_cells: Standard deviation of the noise of the points along their normals, each
+            point's its own [in ``cell``].
         trim_quantile: Share of the lowest-density Poisson vertices removed.
+        relief_cells: Standard deviation of a smooth random displacement of the points along
+            their normals, their normals tilted with it, as dense matching's errors are
+            correlated over a few cells [in ``cell``; 0: none]. White noise alone is averaged
+            away by Poisson and leaves a cleaner surface than a reconstructed pile's.
+        relief_length_cells: Correlation length of that displacement [in ``cell``].
 
     Raises:
         StockpileError: The cell is not positive or there is no rock.
@@ -271,6 +304,14 @@ def bed_surface(
         labels.append(to_label[gid])
     p, n = np.concatenate(points), np.concatenate(normals)
     point_labels = np.concatenate(labels)
+    if relief_cells > 0:
+        value, gradient = _relief_field(p, relief_length_cells * cell, rng)
+        sigma = relief_cells * cell
+        p = p + n * (sigma * value)[:, None]
+        # The displaced surface's normal: the field's gradient along the surface tilts it.
+        along = gradient - np.sum(gradient * n, axis=1, keepdims=True) * n
+        n = n - sigma * along
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
     if noise_cells > 0:
         p = p + n * rng.normal(0.0, noise_cells * cell, size=(len(p), 1))
     extent = float(np.max(p.max(axis=0) - p.min(axis=0)))
