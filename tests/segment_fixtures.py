@@ -61,7 +61,9 @@ def make_report(
     fixed small values: the tests it feeds (evaluation, capture warnings) read rocks, scale and
     warnings.
     """
-    gradation = grade([], None, scale.rel_uncertainty, ReportOptions(resamples=100), scale.metric)
+    gradation = grade(
+        [], None, scale.rel_uncertainty, ReportOptions(resamples=100), scale.metric, resolved_b=0.0
+    )
     segmentation = SegmentationRecord(
         scale=RockScale(0.005, 0.1, 'mesh', 0.1, 0.0075, 0.015),
         raw_regions=len(rocks),

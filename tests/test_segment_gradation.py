@@ -77,6 +77,27 @@ def test_class_table_and_check() -> None:
     assert result.reasons[1].startswith('D15 by mass undefined')
 
 
+def test_a_limit_under_the_smallest_resolved_rock_is_undecided() -> None:
+    spec = load_class_table()['classes']['III']
+    inch = 0.0254
+    curve = gradation([0.1], [1.0])
+    good = replace(curve, d15=9 * inch, d50=12 * inch, d85=17 * inch, d100=20 * inch)
+    # Resolved down to the D15 limits' lower end: the check reads the values as before.
+    assert decide(good, spec, _exact(good), resolved_b=7.3 * inch).verdict == 'PASS'
+    # Rocks under 8 in not resolved: D15's limits (7.3-10.5 in) cannot be read, the rest can.
+    coarse = decide(good, spec, _exact(good), resolved_b=8 * inch)
+    assert coarse.verdict == 'UNDECIDED' and coarse.passed is None
+    assert [r.status for r in coarse.limits] == ['undecided', 'pass', 'pass', 'pass']
+    assert len(coarse.reasons) == 1 and 'D15 by mass' in coarse.reasons[0]
+    assert 'under the smallest rock this run resolves (0.203 m)' in coarse.reasons[0]
+    # A D50 far above its maximum does not fail where its limits lie under the resolved rock.
+    bad = replace(good, d50=16 * inch)
+    assert decide(bad, spec, _exact(bad)).verdict == 'FAIL'
+    unresolved = decide(bad, spec, _exact(bad), resolved_b=12 * inch)
+    assert unresolved.verdict == 'UNDECIDED'
+    assert [r.key for r in unresolved.limits if r.status == 'undecided'] == ['d15', 'd50']
+
+
 def test_a_class_by_count_reads_the_count_curve() -> None:
     # FP-14 class 1 by count: D15 3-6 in, D50 5-8 in, D85 7-11 in, D100 9-15 in.
     table = load_class_table(CONFIG / 'fp14_riprap_classes.yaml')

@@ -75,6 +75,16 @@ def test_cli_writes_a_valid_result_folder(tmp_path, capsys) -> None:
     floor = report.segmentation.min_rock_edges * scale.edge
     assert scale.min_rock_b == pytest.approx(max(scale.requested, floor))
     assert any('the mesh resolves' in w for w in report.warnings)
+    # Its limits under the smallest rock resolved are left undecided whatever the values read.
+    unresolved = [
+        row
+        for row in spec.limits
+        if any(x is not None and x < scale.min_rock_b for x in (row.min, row.max))
+    ]
+    assert unresolved and spec.verdict == 'UNDECIDED'
+    assert all(
+        row.status == 'undecided' and 'this run resolves' in row.reason for row in unresolved
+    )
     assert report.mesh.faces == len(f)
     assert report.mesh.check is not None and report.mesh.check.faces_kept == len(f)
     assert any('kf_00044_000145.png' in w for w in report.warnings)

@@ -112,6 +112,8 @@ def grade(
     rel_scale_uncertainty: float | None,
     options: ReportOptions,
     metric: bool,
+    *,
+    resolved_b: float,
 ) -> GradationRecord:
     """Grade measured rocks: the curve of b by mass, its intervals, the verdict, fit and sieves.
 
@@ -122,6 +124,8 @@ def grade(
         options: Intervals (resamples, confidence, seed), the fit and the sieves' unit.
         metric: Whether sizes are metres: without a scale no class is checked (REFUSED), no
             mass is totalled and no sieve is read.
+        resolved_b: b of the smallest rock the segmentation kept [m]: the class's limits under
+            it are left undecided (see :func:`decide`).
 
     """
     sizes, masses = [r.b for r in rocks], [r.mass for r in rocks]
@@ -129,7 +133,7 @@ def grade(
     intervals = bootstrap_intervals(sizes, masses, rel_scale_uncertainty, options)
     return GradationRecord(
         **{**asdict(curve), 'total_mass': curve.total_mass if metric else None},
-        spec=decide(curve, spec, intervals) if metric else refuse(spec),
+        spec=decide(curve, spec, intervals, resolved_b) if metric else refuse(spec),
         intervals=intervals,
         rosin_rammler=rosin_rammler(curve) if options.rosin_rammler else None,
         sieves=sieve_table(curve, options.length_unit) if metric else [],
@@ -206,7 +210,9 @@ def analyse_mesh(
         scale=copy.deepcopy(info.scale),
         keyframes=copy.deepcopy(info.keyframes),
         rocks=[_rock_record(r, orientation.get(r.id, identity), metric) for r in rocks],
-        gradation=grade(rocks, spec, info.scale.rel_uncertainty, opts, metric),
+        gradation=grade(
+            rocks, spec, info.scale.rel_uncertainty, opts, metric, resolved_b=seg.scale.min_rock_b
+        ),
         segmentation=SegmentationRecord(
             **asdict(sp),
             scale=seg.scale,

@@ -258,6 +258,7 @@ def _limit_row(
     bound: Sequence[float | None],
     value: float | None,
     interval: Sequence[float | None],
+    resolved_b: float,
 ) -> LimitRow:
     lo_lim, hi_lim = bound
     lo, hi = interval
@@ -272,7 +273,16 @@ def _limit_row(
     ]
     margin = min(margins) if margins else None
     status: LimitStatus
-    if (hi_lim is not None and lo is not None and lo > hi_lim) or (
+    unresolved = [x for x in (lo_lim, hi_lim) if x is not None and x < resolved_b]
+    if unresolved:
+        # Rocks under the smallest one the segmentation keeps are joined to a neighbour or
+        # dropped, which moves every size near the limit: neither side of it can be told.
+        status = 'undecided'
+        why = (
+            f'{label}: its limit {min(unresolved):.3f} m is under the smallest rock this run '
+            f'resolves ({resolved_b:.3f} m); capture the pile closer or reconstruct it finer'
+        )
+    elif (hi_lim is not None and lo is not None and lo > hi_lim) or (
         lo_lim is not None and hi is not None and hi < lo_lim
     ):
         status = 'fail'
@@ -324,7 +334,10 @@ def _not_checked() -> ClassDecision:
 
 
 def decide(
-    grad: GradationCurve, spec: Mapping[str, Any] | None, intervals: Intervals
+    grad: GradationCurve,
+    spec: Mapping[str, Any] | None,
+    intervals: Intervals,
+    resolved_b: float = 0.0,
 ) -> ClassDecision:
     """Check a class: the limits table of report.json and a PASS/FAIL/UNDECIDED verdict.
 
@@ -332,6 +345,9 @@ def decide(
         grad: The gradation curve (its sizes by mass, or its curve by count).
         spec: The class entry of the class table, or None.
         intervals: What :func:`bootstrap_intervals` returned for the same rocks.
+        resolved_b: b of the smallest rock the segmentation kept [m] (``RockScale.min_rock_b``):
+            a limit under it is undecided whatever the value, since the rocks that would
+            decide it were not resolved.
 
     Returns:
         The decision; ``passed`` is True for PASS, False for FAIL and None for UNDECIDED;
@@ -348,7 +364,7 @@ def decide(
             value = percent_size(grad.sizes, grad.percent_passing_count, float(key[1:]))
         else:
             value = grad.characteristic[key]
-        rows.append(_limit_row(key, basis, bound, value, by_key[key]))
+        rows.append(_limit_row(key, basis, bound, value, by_key[key], resolved_b))
     states = {r.status for r in rows}
     verdict: Verdict = (
         'FAIL' if 'fail' in states else 'UNDECIDED' if 'undecided' in states else 'PASS'
