@@ -121,7 +121,7 @@ def test_relief_roughens_the_ground_as_dense_matching_does() -> None:
         strip = (gap > 0.3 * SMALLEST) & (gap < 0.7 * SMALLEST)
         return centres[strip & (surface.labels == 0), 2]
 
-    plain = ground_heights(bed_surface(_bed(), cell, np.random.default_rng(2), noise_cells=0.2))
+    plain = ground_heights(_surface(4.0))
     rough = bed_surface(_bed(), cell, np.random.default_rng(2), noise_cells=0.2, relief_cells=0.3)
     heights = ground_heights(rough)
     assert len(plain) > 300 and len(heights) > 300
