@@ -30,7 +30,7 @@ F64 = npt.NDArray[np.float64]
 _TUKEY = 4.685
 # The residuals' spread is taken from the points nearest the plane: the standard deviation of a
 # Gaussian is its absolute values' 25th percentile over 0.3186. The median (the MAD) would need
-# half the points on the plane; a survey of a pile has a third of them on the ground.
+# half the points on the plane; a survey of a pile has more of them on the pile than on the ground.
 _QUANTILE = 25.0
 _QUANTILE_SIGMA = 1.0 / 0.3186
 _ITERATIONS = 30
