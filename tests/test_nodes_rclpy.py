@@ -20,6 +20,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from stockpile_ros.camera import CameraModel  # noqa: E402
 from stockpile_ros.nodes.common import Inbox, RclpyFactory, qos_profile  # noqa: E402
 from stockpile_ros.nodes.interfaces import get_message  # noqa: E402
 from stockpile_ros.nodes.keyframe_node import KeyframeNode  # noqa: E402
@@ -203,3 +204,30 @@ def test_bad_frames_give_diagnostics_and_the_node_keeps_running(ros: None, tmp_p
         spinner.join(5)
         node.destroy_node()
         probe.destroy_node()
+
+
+def test_a_quiet_check_while_the_first_frame_waits_in_the_inbox_keeps_its_camera(
+    ros: None, tmp_path: Path
+) -> None:
+    """The camera's quiet time counts from a frame's arrival, not from when the inbox reads it."""
+    params = [Parameter('work_dir', value=str(tmp_path)), Parameter('compressed', value=False),
+              Parameter('recon.use_odometry', value=False)]  # fmt: skip
+    node = KeyframeNode(parameter_overrides=params)
+    callbacks = {topics.absolute(s.topic_name): s.callback for s in node.subscriptions}
+    f = RclpyFactory()
+    camera = CameraModel(64, 48, np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]]))
+    pixels = (np.arange(64 * 48 * 3) % 251).astype(np.uint8).reshape(48, 64, 3)
+    gate = threading.Event()
+    try:
+        node.last_image = time.monotonic() - 10  # the camera was quiet before the pass
+        node.inbox.put(lambda: gate.wait(5))  # a busy inbox: what comes now waits in it
+        callbacks[topics.absolute(topics.IMAGE)](m.image(f, pixels, 1, 'cam'))
+        node.on_quiet()  # the timer, between the frame's arrival and its CameraInfo's
+        callbacks[topics.absolute(topics.CAMERA_INFO)](m.camera_info(f, camera, 1))
+        gate.set()
+        assert node.inbox.drain(5)
+        records = node.component.collector.store.records
+        assert len(records) == 1 and records[0].camera is not None
+    finally:
+        gate.set()
+        node.destroy_node()

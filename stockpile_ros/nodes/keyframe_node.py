@@ -43,7 +43,15 @@ class KeyframeNode(Node):
         c = self.component
         compressed = bool(settings.values['compressed'])
         image = topics.IMAGE + (topics.COMPRESSED_SUFFIX if compressed else '')
-        subscribe(self, image, self._queue(self._image, droppable=True))
+        queue_image = self._queue(self._image, droppable=True)
+
+        def on_image(msg: Any) -> None:
+            # Stamped on arrival, not when the inbox reaches it: a quiet check between the two
+            # sent the first keyframe out before its CameraInfo, queued just behind it, was read.
+            self.last_image = time.monotonic()
+            queue_image(msg)
+
+        subscribe(self, image, on_image)
         subscribe(self, topics.CAMERA_INFO, self._queue(c.on_camera_info))
         subscribe(self, topics.ODOMETRY, self._queue(c.on_odometry))
         subscribe(self, topics.TF_STATIC, self._queue(lambda m, t: c.on_tf(m, True, t)))
@@ -70,13 +78,12 @@ class KeyframeNode(Node):
         return callback
 
     def _image(self, msg: Any, log_ns: int) -> list[Publication]:
-        self.last_image = time.monotonic()
         out = self.component.on_dropped(self.inbox.dropped - self._dropped, log_ns)
         self._dropped = self.inbox.dropped
         return out + self.component.on_image(msg, log_ns)
 
     def on_quiet(self) -> None:
-        """Send the waiting keyframes once no image has come for the component's wait."""
+        """Send the waiting keyframes once no image has arrived for the component's wait."""
         if time.monotonic() - self.last_image > WAIT_NS / 1e9:
             self.inbox.put(self._flush)
 
