@@ -184,7 +184,7 @@ def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-unty
     assert len(report.rocks) > 10
 
 
-def test_a_foreign_mesh_is_levelled_only_when_up_is_given(tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_a_foreign_mesh_is_levelled_unless_it_is_in_the_stockpile_frame(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from segment_fixtures import height_field
 
     from stockpile_ros.meshio import LabelledMesh, read_labelled_mesh, write_labelled_mesh
@@ -197,17 +197,29 @@ def test_a_foreign_mesh_is_levelled_only_when_up_is_given(tmp_path) -> None:  # 
         return z
 
     v, f = height_field(bumps, 0.5, 60)
-    tilt = Rotation.from_rotvec([0.3, 0.0, 0.0]).as_matrix()
-    path = tmp_path / 'other_tool.ply'
-    write_labelled_mesh(path, LabelledMesh(v @ tilt.T + [0, 0, 50.0], f,
-                                           np.zeros(len(f), dtype=np.int32)))  # fmt: skip
-    kept, levelled = tmp_path / 'kept', tmp_path / 'levelled'
-    assert main(['segment', str(path), '--out', str(kept), '--units', 'm']) == 0
-    assert load(Report, kept / 'report.json').mesh.model_to_stockpile is None
-    assert main(['segment', str(path), '--out', str(levelled), '--units', 'm', '--up', 'fit']) == 0
-    levelling = load(Report, levelled / 'report.json').mesh.model_to_stockpile
-    assert levelling is not None
-    rotation = np.asarray(levelling.rotation).reshape(3, 3)
-    assert rotation[2] @ (tilt @ [0.0, 0.0, 1.0]) > 0.999
-    z = read_labelled_mesh(levelled / 'segments.ply').vertices[:, 2]
-    assert np.percentile(z, 1) == pytest.approx(0.0, abs=1e-3) and z.max() < 0.15
+    level = tmp_path / 'level.ply'
+    write_labelled_mesh(level, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    assert main(['segment', str(level), '--out', str(tmp_path / 'level_out'), '--units', 'm']) == 0
+    upright = [r.b for r in load(Report, tmp_path / 'level_out' / 'report.json').rocks]
+    assert upright
+    # Another tool's frame: survey heights, tilted, or turned on its side.
+    for name, rotvec, lift in (('tilted', [0.3, 0.0, 0.0], 50.0), ('side', [0.0, 1.6, 0.0], 0.0)):
+        tilt = Rotation.from_rotvec(rotvec).as_matrix()
+        path = tmp_path / f'{name}.ply'
+        write_labelled_mesh(path, LabelledMesh(v @ tilt.T + [0, 0, lift], f,
+                                               np.zeros(len(f), dtype=np.int32)))  # fmt: skip
+        out = tmp_path / f'{name}_out'
+        assert main(['segment', str(path), '--out', str(out), '--units', 'm']) == 0
+        report = load(Report, out / 'report.json')
+        assert report.mesh.model_to_stockpile is not None
+        rotation = np.asarray(report.mesh.model_to_stockpile.rotation).reshape(3, 3)
+        assert rotation[2] @ (tilt @ [0.0, 0.0, 1.0]) > 0.999, name
+        z = read_labelled_mesh(out / 'segments.ply').vertices[:, 2]
+        assert np.percentile(z, 1) == pytest.approx(0.0, abs=1e-3) and z.max() < 0.15
+        assert [r.b for r in report.rocks] == pytest.approx(upright, rel=1e-3), name
+    # A mesh in the stockpile frame (this project's own) is kept as it is.
+    again = tmp_path / 'again'
+    assert main(['segment', str(out / 'segments.ply'), '--out', str(again), '--units', 'm']) == 0
+    kept = load(Report, again / 'report.json')
+    assert kept.mesh.model_to_stockpile is None
+    assert [r.b for r in kept.rocks] == pytest.approx(upright, rel=1e-3)

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ..artefacts import MeshInfo, ScaleMethod, ScaleRecord, SimilarityRecord, load
 from ..cloud import (
     cloud_segment_params,
@@ -19,6 +21,7 @@ from ..cloud import (
 from ..errors import StockpileError
 from ..meshcheck import UNITS, MeshCheck, check_mesh, read_mesh
 from ..meshio import LabelledMesh
+from ..segment.params import median_edge
 from ..segment.pipeline import analyse_mesh
 from ..segment.provenance import Provenance
 from ..segment.qa import report_options
@@ -37,14 +40,14 @@ with the rocks outlined, when the keyframes/ folder of the work folder is beside
 folder), index.html and report.pdf. The verdict against a class is PASS, FAIL or UNDECIDED (a
 confidence interval straddles a limit); without a metric scale no class is checked.
 
-Inputs: a mesh (PLY or OBJ with faces: this project's, taken as it is, or another tool's,
-levelled like a cloud when --up is given) or a point cloud (PLY without faces, OBJ vertices,
-LAS/LAZ, XYZ/CSV/TXT columns x y z [nx ny nz] [r g b] with an optional header), with or without
-normals and colours. A cloud is levelled (up from --up, else the normal of its robust trend plane:
-no bare ground is needed), its normals estimated where missing, and Poisson-meshed at a depth
-whose finest cell is about the point spacing (cloud.* parameters); its smallest rock is
-cloud.min_rock_spacings point spacings (in place of the 20-edge floor below, which is what a mesh
-from photos resolves). Units: LAS/LAZ coordinates
+Inputs: a mesh (PLY or OBJ with faces: levelled like a cloud unless it is in the stockpile
+frame already, as this project's are, or --mesh-info gives its frame) or a point cloud (PLY
+without faces, OBJ vertices, LAS/LAZ, XYZ/CSV/TXT columns x y z [nx ny nz] [r g b] with an
+optional header), with or without normals and colours. A cloud is levelled (up from --up, else
+the normal of its robust trend plane: no bare ground is needed), its normals estimated where
+missing, and Poisson-meshed at a depth whose finest cell is about the point spacing (cloud.*
+parameters); its smallest rock is cloud.min_rock_spacings point spacings (in place of the
+20-edge floor below, which is what a mesh from photos resolves). Units: LAS/LAZ coordinates
 are taken as metres (scale method "input units"), other files as model units (no metres, no
 verdict) unless --units names their unit (scale method "given").
 
@@ -75,7 +78,8 @@ _ALIASES = (
     Alias('--class-table', 'gradation.class_table',
           'class table YAML (default config/riprap_classes.yaml)', metavar='FILE'),
     Alias('--up', 'cloud.up', 'up in the input frame, x,y,z, or fit (the robust trend plane); '
-          'a cloud is always levelled, a mesh only when this is given', metavar='X,Y,Z|fit'),
+          'a cloud is always levelled, a mesh unless it is in the stockpile frame already',
+          metavar='X,Y,Z|fit'),
 )  # fmt: skip
 
 
@@ -128,21 +132,43 @@ def _from_cloud(
     return mesh, check, info
 
 
-def _level(mesh: LabelledMesh, settings: Settings, info: MeshInfo) -> None:
-    """Level a foreign mesh as a cloud would be (:mod:`stockpile_ros.cloud.level`), in place."""
-    up = parse_up(settings.cloud.up)
+def _level(mesh: LabelledMesh, settings: Settings, info: MeshInfo) -> bool:
+    """Level a foreign mesh as a cloud would be (:mod:`stockpile_ros.cloud.level`), in place.
+
+    Without ``--up`` a mesh already in the stockpile frame is kept as it is: one whose levelled
+    heights are within one median edge of its own everywhere, as this project's meshes are. The
+    segmentation takes z = 0 as the ground, so a mesh in another tool's frame (survey heights,
+    a tilt, another axis up) would otherwise give its ground as rocks, and sizes that look right.
+
+    Returns:
+        Whether the mesh was moved.
+
+    """
+    v, f = mesh.vertices, mesh.faces
+    up, why = parse_up(settings.cloud.up), 'given'
     if up is None:
-        up, _ = trend_up(mesh.vertices)
-    sim, plane = level_transform(mesh.vertices, up, 1.0, settings.cloud.ground_percentile)
-    mesh.vertices = sim.apply(mesh.vertices)
-    info.ground_plane_model = [float(v) for v in plane]
+        # The winding says which side was seen; where it is mixed, the bulge does.
+        normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        up, why = trend_up(v, normals)
+    sim, plane = level_transform(v, up, 1.0, settings.cloud.ground_percentile)
+    levelled = sim.apply(v)
+    moved = float(np.abs(levelled[:, 2] - v[:, 2]).max())
+    if 'cloud.up' not in settings.explicit and moved <= median_edge(v, f):
+        return False
+    tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+    print(f'mesh: levelled into the stockpile frame: up {tilt:.1f} deg from the input z ({why}), '
+          f'heights moved by up to {moved:.3g} m')  # fmt: skip
+    mesh.vertices = levelled
+    info.ground_plane_model = [float(x) for x in plane]
     info.model_to_stockpile = SimilarityRecord.of(sim)
+    return True
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     settings = settings_from_args(args)
     info: MeshInfo | None
+    levelled = False
     if not is_mesh_file(args.mesh):
         if args.mesh_info is not None:
             raise StockpileError('--mesh-info goes with a mesh; a point cloud is meshed here')
@@ -158,12 +184,13 @@ def run(args: argparse.Namespace) -> int:
         if info is None and args.units is not None:
             # The user vouches for the mesh's units: metric, though no target or odometry says so.
             info = MeshInfo(ScaleRecord('given', UNITS[args.units]), units='m')
-        if 'cloud.up' in settings.explicit:
-            if args.mesh_info is not None:
-                raise StockpileError('--up levels a foreign mesh; this one is levelled already '
-                                     '(its --mesh-info has model_to_stockpile)')  # fmt: skip
-            info = info or MeshInfo()
-            _level(mesh, settings, info)
+        if args.mesh_info is None:
+            levelling = info or MeshInfo()
+            levelled = _level(mesh, settings, levelling)
+            info = levelling if levelled else info
+        elif 'cloud.up' in settings.explicit:
+            raise StockpileError('--up levels a foreign mesh; this one is levelled already '
+                                 '(its --mesh-info has model_to_stockpile)')  # fmt: skip
     spec = class_spec(settings)
     options = report_options(settings.values)
     analysis = analyse_mesh(
@@ -174,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     )  # fmt: skip
     report = analysis.report
     report.mesh.check = check
-    if info is not None and (info.cloud is not None or 'cloud.up' in settings.explicit):
+    if info is not None and (info.cloud is not None or levelled):
         # How a cloud or a foreign mesh was levelled and meshed: the way back to its frame.
         report.mesh.cloud = info.cloud
         report.mesh.poisson = info.poisson or None
