@@ -62,6 +62,15 @@ class CloudOptions:
         depth: Poisson octree depth; 0 chooses it from the spacing (see cell_spacings).
         cell_spacings: The finest Poisson cell is at most this many median point spacings
             [spacings]: one keeps every sample in a cell of its own.
+        trim_spacings: The Poisson surface is kept where it lies within this many median point
+            spacings of a point (in place of poisson.max_distance, a photo route's) [spacings].
+            With the finest cell at a spacing, a vertex on a sampled surface lies within about
+            0.7 spacings of a sample, plus the noise; the bridges Poisson draws over a scanner's
+            occlusion shadows lie farther, and where they meet the rocks they leave creases that
+            the search cuts rocks at. On the 220-rock survey of bench/bench_cloud.py (7.5 mm,
+            2 mm noise), visible rocks found and precision: 4 spacings 0.65 and 0.28, 3: 0.75 and
+            0.32, 2: 0.86 and 0.47, 1.5: 0.86 and 0.55, 1.25: 0.90 and 0.63, 1: 0.70 and 0.46
+            (holes in the rocks). 1.5 keeps a margin from that edge for noisier scanners.
         max_depth: Deepest automatic Poisson depth (memory and time grow about fourfold a
             level); a warning says when it limits the cell.
         max_points: Points kept from a stream; past it the accumulated cloud is thinned on a
@@ -72,7 +81,8 @@ class CloudOptions:
             a cell), unless segment.min_rock_edges is set explicitly. The floor of 20 edges is
             what a mesh reconstructed from photos resolves; a cloud's points resolve their
             spacing. On four simulated 1 cm surveys (sim/survey.py; 30 rocks of 12-30 cm, 24
-            of 14-30, 60 of 10-40, 100 of 8-25; 2 mm noise) 10 spacings found 93, 96, 86 and 74 %
+            of 14-30, 60 of 10-40, 100 of 8-25; 2 mm noise; trimmed at 4 spacings, before
+            trim_spacings) 10 spacings found 93, 96, 86 and 74 %
             of the visible rocks at precisions 0.59, 0.64, 0.64 and 0.74 (the false ones mostly
             rocks split in two), 14 spacings 93, 96, 84 and 48 % at 0.73, 0.74, 0.75 and 0.69
             (the small rocks of the last pile merged): a bed of small grains needs the lower.
@@ -87,6 +97,7 @@ class CloudOptions:
     isolated_spacings: Annotated[float, Range(2.0, 1000.0)] = 10.0
     depth: Annotated[int, Range(0, 14)] = 0
     cell_spacings: Annotated[float, Range(0.25, 16.0)] = 1.0
+    trim_spacings: Annotated[float, Range(0.5, 1000.0)] = 1.5
     max_depth: Annotated[int, Range(5, 14)] = 11
     max_points: Annotated[int, Range(1000, 1_000_000_000)] = 5_000_000
     min_rock_spacings: Annotated[float, Range(4.0, 10_000.0)] = 10.0
@@ -216,7 +227,8 @@ def mesh_cloud(
             f'{cell / spacing_m:.2g} point spacings, coarser than the points resolve'
         )
     colors = None if cloud.colors is None else cloud.colors[keep].astype(np.float64) / 255.0
-    mesh, record = poisson_surface(local, normals, colors, replace(poisson, depth=depth))
+    trimmed = replace(poisson, depth=depth, max_distance=options.trim_spacings)
+    mesh, record = poisson_surface(local, normals, colors, trimmed)
     faces = np.asarray(mesh.triangles, dtype=np.int64)
     if len(faces) == 0:
         raise CaptureError(

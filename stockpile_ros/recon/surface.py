@@ -30,7 +30,7 @@ class PoissonOptions:
         depth: Octree depth of the Poisson solve (9 or 10 for a pile).
         density_quantile: Share of vertices with the lowest density removed.
         max_distance: Vertices farther than this many median point spacings from every point
-            are removed (0 disables).
+            are removed (0 disables; a point cloud's route uses cloud.trim_spacings).
         margin: Crop box margin as a share of the points' bounding box diagonal.
         target_faces: Quadric simplification to this many faces (0 keeps them all).
         threads: Threads of the Poisson solve (0: all cores). Open3D's parallel solve is not
