@@ -33,6 +33,7 @@ __all__ = [
     'MeshCheck',
     'check_mesh',
     'degenerate_faces',
+    'duplicate_faces',
     'read_mesh',
 ]
 
@@ -122,6 +123,13 @@ def degenerate_faces(
     return np.asarray(repeated | (twice_area <= _ZERO_HEIGHT * longest), dtype=bool)
 
 
+def duplicate_faces(faces: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
+    """Mask of faces over the three vertices of an earlier face (in any order)."""
+    repeated = np.ones(len(faces), dtype=bool)
+    repeated[_first_of_each_set(faces)] = False
+    return repeated
+
+
 def _first_of_each_set(faces: npt.NDArray[np.int64]) -> npt.NDArray[np.intp]:
     """Return the indices, in file order, of the first face over each set of three vertices."""
     if not len(faces):
@@ -186,7 +194,7 @@ def check_mesh(
     check_arrays(vertices, faces, source)
     degenerate = degenerate_faces(vertices, faces)
     kept = np.flatnonzero(~degenerate)
-    unique = kept[_first_of_each_set(faces[kept])]
+    unique = kept[~duplicate_faces(faces[kept])]
     duplicates = len(kept) - len(unique)
     if len(unique) == 0:
         raise MeshError(

@@ -153,11 +153,14 @@ def test_a_simulated_survey_from_file_to_report(survey) -> None:  # type: ignore
     assert report.mesh.cloud['up']['tilt_deg'] == pytest.approx(10.0, abs=1.0)
     scores = score_survey(out, root / 'truth', s)
     found = scores['detection']
-    # Measured: 29 visible rocks, 46 reported (10 split in two), recall 0.93, precision 0.59,
-    # median |b| error 6 %, D50 -6 %.
-    assert found['recall_visible'] >= 0.85 and found['precision_visible'] >= 0.5, found
-    assert scores['sizes']['summary_visible']['b']['median_abs_pct'] < 12
-    assert abs(scores['gradation']['d50_error']) < 0.12
+    # Measured: 29 visible rocks, 35 reported (3 split in two), recall 1.0, precision 0.83,
+    # median |b| error 5.4 %, D50 -4.3 %; with the surface trimmed at 4 point spacings (the
+    # bridges over the occlusion shadows kept) 46 reported, 0.93, 0.59, 6 %, -6 %.
+    assert found['recall_visible'] >= 0.9 and found['precision_visible'] >= 0.75, found
+    assert scores['sizes']['summary_visible']['b']['median_abs_pct'] < 8
+    assert abs(scores['gradation']['d50_error']) < 0.08
+    # The Poisson surface is our own: nothing in it to warn about (it had 21 repeated faces).
+    assert report.mesh.check is not None and report.mesh.check.duplicate_faces == 0
 
 
 def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-untyped-def]

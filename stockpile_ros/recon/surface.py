@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import open3d as o3d
 
-from ..meshcheck import degenerate_faces
+from ..meshcheck import degenerate_faces, duplicate_faces
 from ..ranges import Range
 
 __all__ = ['PoissonOptions', 'poisson_surface']
@@ -89,10 +89,11 @@ def poisson_surface(
     position = np.asarray(mesh.vertices)
     drop |= np.any((position < lo - pad) | (position > hi + pad), axis=1)
     mesh.remove_vertices_by_mask(drop)
-    # Zero-area faces too, by the rule a mesh read from a file is checked with: our own mesh
-    # should not be warned about.
-    flat = degenerate_faces(np.asarray(mesh.vertices), np.asarray(mesh.triangles, dtype=np.int64))
-    mesh.remove_triangles_by_mask(flat.tolist())
+    # Zero-area and repeated faces too, by the rules a mesh read from a file is checked with:
+    # our own mesh should not be warned about (a cloud's trimmed surface had 140 repeated faces).
+    triangles = np.asarray(mesh.triangles, dtype=np.int64)
+    bad = degenerate_faces(np.asarray(mesh.vertices), triangles) | duplicate_faces(triangles)
+    mesh.remove_triangles_by_mask(bad.tolist())
     mesh.remove_unreferenced_vertices()
     if 0 < options.target_faces < len(mesh.triangles):
         mesh = mesh.simplify_quadric_decimation(options.target_faces)
