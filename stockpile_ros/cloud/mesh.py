@@ -80,12 +80,14 @@ class CloudOptions:
             mesh's median edges (about 1.5 spacings on a survey: Poisson keeps one to two samples
             a cell), unless segment.min_rock_edges is set explicitly. The floor of 20 edges is
             what a mesh reconstructed from photos resolves; a cloud's points resolve their
-            spacing. On four simulated 1 cm surveys (sim/survey.py; 30 rocks of 12-30 cm, 24
-            of 14-30, 60 of 10-40, 100 of 8-25; 2 mm noise; trimmed at 4 spacings, before
-            trim_spacings) 10 spacings found 93, 96, 86 and 74 %
-            of the visible rocks at precisions 0.59, 0.64, 0.64 and 0.74 (the false ones mostly
-            rocks split in two), 14 spacings 93, 96, 84 and 48 % at 0.73, 0.74, 0.75 and 0.69
-            (the small rocks of the last pile merged): a bed of small grains needs the lower.
+            spacing. On four simulated 1 cm surveys (sim/survey.py, seed 1; 30 rocks of 12-30 cm,
+            24 of 14-30, 60 of 10-40, 100 of 8-25; 2 mm noise; surface trimmed at
+            trim_spacings 1.5) 10 spacings found 100, 92, 94 and 86 % of the visible rocks at
+            precisions 0.83, 0.67, 0.77 and 0.89 (the false ones mostly rocks split in two), 14
+            spacings 93, 92, 87 and 59 % at 0.96, 0.81, 0.85 and 0.86 (the small rocks of the
+            last pile merged, 22 merges against 11): a bed of small grains needs the lower.
+            Trimmed at 4 spacings, as before trim_spacings, 10 spacings had found 93, 96, 86 and
+            74 % at 0.59, 0.64, 0.64 and 0.74.
 
     """
 
