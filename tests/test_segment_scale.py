@@ -13,7 +13,7 @@ from stockpile_ros.artefacts import MeshInfo, ScaleRecord
 from stockpile_ros.segment.adjacency import FaceAdjacency
 from stockpile_ros.segment.cleanup import drop_facing_down, merge_fragments
 from stockpile_ros.segment.gradation import load_class_table
-from stockpile_ros.segment.measure import measure_rocks
+from stockpile_ros.segment.measure import MeasureParams, measure_rocks
 from stockpile_ros.segment.params import (
     RESOLVABLE_EDGES,
     SegmentParams,
@@ -189,3 +189,31 @@ def test_a_lone_region_facing_down_is_dropped() -> None:
     lift = np.array([1.0, 1.0, 1.0, -1.0, 0.5, -1.0, -1.0])
     assert drop_facing_down(labels, adj, lift).tolist() == [1, 1, 1, 2, 2, 0, 0]
     assert drop_facing_down(labels, adj, np.abs(lift)).tolist() == labels.tolist()
+
+
+def test_ground_off_the_plane_is_left_out_as_a_sheet_with_a_warning() -> None:
+    # Nine boulders on ground waving 3 cm over a 1.2 m period: the crests stand above the
+    # ground tolerance of z = 0 and grow regions metres wide and a few centimetres thick.
+    centres = [(x, y) for x in (-0.8, 0.0, 0.8) for y in (-0.8, 0.0, 0.8)]
+
+    def ground(x: F64, y: F64) -> F64:
+        return np.asarray(0.03 * (np.sin(2 * np.pi * x / 1.3) * np.cos(2 * np.pi * y / 1.1) + 1))
+
+    def surface(x: F64, y: F64) -> F64:
+        z = ground(x, y)
+        for cx, cy in centres:
+            cap = float(ground(np.array(cx), np.array(cy))) + 0.7 * np.sqrt(
+                np.clip(0.2**2 - (x - cx) ** 2 - (y - cy) ** 2, 0, None)
+            )
+            z = np.where((x - cx) ** 2 + (y - cy) ** 2 < 0.2**2, np.maximum(z, cap), z)
+        return z
+
+    v, f = height_field(surface, 1.4, 200)
+    info = MeshInfo(ScaleRecord('given', 1.0), units='m')
+    kept = analyse_mesh(v, f, mesh_info=info, measure_params=MeasureParams(min_thickness=0.0))
+    assert max(r.b for r in kept.rocks) > 1.0  # the crests, measured as a rock
+    analysis = analyse_mesh(v, f, mesh_info=info)
+    assert len(analysis.rocks) == len(centres) and all(r.b < 0.5 for r in analysis.rocks)
+    assert any('2 regions left out as sheets' in w for w in analysis.report.warnings)
+    sheets = set(np.unique(kept.segmentation.labels)) - set(np.unique(analysis.segmentation.labels))
+    assert len(sheets) == 2  # their faces are no rock's in the segmented mesh either

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -22,7 +22,15 @@ from ..result import (
     SegmentationRecord,
 )
 from .gradation import gradation
-from .measure import MeasureParams, RockMeasure, measure_rocks, solid_axes, visibility_warnings
+from .measure import (
+    MeasureParams,
+    RockMeasure,
+    measure_rocks,
+    sheet_warnings,
+    solid_axes,
+    split_sheets,
+    visibility_warnings,
+)
 from .params import SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
@@ -201,7 +209,11 @@ def analyse_mesh(
     # A class's sizes are metres: in model units they would set a meaningless smallest rock.
     seg = segment_mesh(v, f, sp, spec if metric else None)
     t1 = time.perf_counter()
-    rocks = measure_rocks(v, seg, mp)
+    rocks, sheets = split_sheets(measure_rocks(v, seg, mp), mp)
+    if sheets:
+        # Not rocks: their faces go with the ground, in the segmented mesh too.
+        gone = np.isin(seg.labels, [r.id for r in sheets])
+        seg = replace(seg, labels=np.where(gone, 0, seg.labels).astype(seg.labels.dtype))
     orientation = principal_axes(v, seg, [r.id for r in rocks])
     identity = [0.0, 0.0, 0.0, 1.0]
     report = Report(
@@ -225,6 +237,7 @@ def analyse_mesh(
         mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
         warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
+        + sheet_warnings(sheets, mp)
         + visibility_warnings(rocks),
     )
     return Analysis(v, f, colors, seg, rocks, report)
