@@ -226,3 +226,37 @@ def test_a_foreign_mesh_is_levelled_unless_it_is_in_the_stockpile_frame(tmp_path
     kept = load(Report, again / 'report.json')
     assert kept.mesh.model_to_stockpile is None
     assert [r.b for r in kept.rocks] == pytest.approx(upright, rel=1e-3)
+
+
+def test_a_levelled_mesh_of_a_heap_over_little_ground_is_kept(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from segment_fixtures import height_field
+
+    from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+    from stockpile_ros.segment.adjacency import face_geometry
+    from stockpile_ros.segment.params import median_edge
+
+    # A heap of boulders over 85 % of a square, in the stockpile frame already.
+    rng = np.random.default_rng(3)
+    radius = np.sqrt(0.85 * 4 / np.pi)
+    boulders = [(x, y, r) for x, y, r in zip(rng.uniform(-1, 1, 400), rng.uniform(-1, 1, 400),
+                                             rng.uniform(0.06, 0.14, 400), strict=True)
+                if x * x + y * y < radius**2]  # fmt: skip
+
+    def heap(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        z = np.clip(0.4 * (1 - (x**2 + y**2) / radius**2), 0, None)
+        for cx, cy, r in boulders:
+            base = max(0.0, 0.4 * (1 - (cx**2 + cy**2) / radius**2))
+            d2 = (x - cx) ** 2 + (y - cy) ** 2
+            z = np.where(d2 < r * r, np.maximum(z, base + np.sqrt(np.clip(r * r - d2, 0, None))), z)
+        return z
+
+    v, f = height_field(heap, 1.0, 250)
+    # The trend plane of its evenly spread vertices is off (0.3 degrees): levelled by it, the
+    # ground would move by more than an edge.
+    up, _ = trend_up(v, face_geometry(v, f).normals)
+    moved = level_transform(v, up, 1.0, 1.0)[0].apply(v)[:, 2] - v[:, 2]
+    assert np.abs(moved).max() > median_edge(v, f)
+    path = tmp_path / 'heap.ply'
+    write_labelled_mesh(path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+    assert main(['segment', str(path), '--out', str(tmp_path / 'out'), '--units', 'm']) == 0
+    assert load(Report, tmp_path / 'out' / 'report.json').mesh.model_to_stockpile is None
