@@ -331,17 +331,17 @@ def split_sheets(
     return [r for r in rocks if r.id not in ids], sheets
 
 
-def sheet_warnings(sheets: list[RockMeasure], params: MeasureParams) -> list[str]:
-    """Warnings for report.json about the regions left out as sheets."""
+def sheet_warnings(sheets: list[RockMeasure], params: MeasureParams, unit: str) -> list[str]:
+    """Warnings for report.json about the regions left out as sheets (lengths in ``unit``)."""
     if not sheets:
         return []
-    largest = max(sheets, key=lambda r: r.b)
+    r = max(sheets, key=lambda r: r.b)
     return [
-        f'{len(sheets)} regions left out as sheets, not rocks (thickness under '
-        f'{params.min_thickness:g} of their width; the largest {largest.a:.2f} x {largest.b:.2f} m '
-        f'and {largest.c * 1000:.0f} mm thick): ground that is not on the plane z = 0 (uneven '
-        'ground, or a wrong up: pass --up) or slivers of buried rocks. Rocks touching them may '
-        'be missing or cut.'
+        f'{len(sheets)} region{"s" if len(sheets) > 1 else ""} left out as sheets, not rocks '
+        f'(thickness under {params.min_thickness:g} of their width; the largest {r.a:.3g} x '
+        f'{r.b:.3g} {unit} and {r.c:.3g} {unit} thick): ground that is not on the plane z = 0 '
+        '(uneven ground, or a wrong up: pass --up) or slivers of buried rocks. Rocks touching '
+        'them may be missing or cut.'
     ]
 
 

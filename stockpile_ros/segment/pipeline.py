@@ -237,7 +237,7 @@ def analyse_mesh(
         mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
         warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
-        + sheet_warnings(sheets, mp)
+        + sheet_warnings(sheets, mp, 'm' if metric else 'model units')
         + visibility_warnings(rocks),
     )
     return Analysis(v, f, colors, seg, rocks, report)
