@@ -169,6 +169,10 @@ def test_partly_seen_rocks_raise_a_capture_warning() -> None:
     rocks.append(replace(base, id=5, visible_fraction=0.44))
     (text,) = visibility_warnings(rocks)
     assert text.startswith('2 of 5 rocks') and '(ids 3, 5)' in text
+    # Many: the first twelve, and the table for the rest.
+    many = [replace(base, id=k, visible_fraction=0.3) for k in range(1, 31)]
+    (long,) = visibility_warnings(many)
+    assert '(ids 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12 and 18 more: rocks.csv, partly_seen)' in long
     report = make_report([], ScaleRecord())
     report.warnings = [text]
     ((topic, msg),) = capture_warnings(m.RosbagsFactory(typestore()), 0, report)

@@ -75,6 +75,9 @@ PARTLY_SEEN = 0.45
 #: Share of partly seen rocks over which the capture is reported as too one-sided.
 PARTLY_SEEN_SHARE = 0.25
 
+# Ids a warning lists before it points to the table.
+_LISTED_IDS = 12
+
 
 @dataclass(frozen=True)
 class MeasureParams:
@@ -350,8 +353,12 @@ def visibility_warnings(rocks: list[RockMeasure]) -> list[str]:
     partly = [r for r in rocks if r.visible_fraction < PARTLY_SEEN]
     if not rocks or len(partly) <= PARTLY_SEEN_SHARE * len(rocks):
         return []
+    # A survey's warning listed 169 ids: the first few, and rocks.csv's partly_seen for all.
+    ids = ', '.join(str(r.id) for r in partly[:_LISTED_IDS])
+    if len(partly) > _LISTED_IDS:
+        ids += f' and {len(partly) - _LISTED_IDS} more: rocks.csv, partly_seen'
     return [
         f'{len(partly)} of {len(rocks)} rocks were seen on under {PARTLY_SEEN:.0%} of their '
-        f'surface (ids {", ".join(str(r.id) for r in partly)}): their sizes are lower bounds, '
+        f'surface (ids {ids}): their sizes are lower bounds, '
         'about a fifth small on simulated piles. Capture the pile from more sides or heights.'
     ]
