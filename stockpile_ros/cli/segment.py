@@ -21,7 +21,7 @@ from ..cloud import (
 from ..errors import StockpileError
 from ..meshcheck import UNITS, MeshCheck, check_mesh, read_mesh
 from ..meshio import LabelledMesh
-from ..segment.adjacency import face_geometry
+from ..segment.adjacency import FaceGeometry, face_geometry
 from ..segment.params import median_edge
 from ..segment.pipeline import analyse_mesh
 from ..segment.provenance import Provenance
@@ -133,9 +133,9 @@ def _from_cloud(
     return mesh, check, info
 
 
-def _ground_share(v: np.ndarray, f: np.ndarray, settings: Settings, edge: float) -> float:
+def _ground_share(g: FaceGeometry, settings: Settings, edge: float) -> float:
     """Share of the surface the segmentation would take as ground, with z = 0 where it is."""
-    p, g = settings.segment, face_geometry(v, f)
+    p = settings.segment
     ground = (np.abs(g.centroids[:, 2]) < p.ground_tolerance_edges * edge) & (
         g.normals[:, 2] >= p.ground_min_nz
     )
@@ -159,17 +159,19 @@ def _level(mesh: LabelledMesh, settings: Settings, info: MeshInfo) -> bool:
 
     """
     v, f = mesh.vertices, mesh.faces
+    given = face_geometry(v, f)
     up, why = parse_up(settings.cloud.up), 'given'
     if up is None:
         # The winding says which side was seen; where it is mixed, the bulge does.
-        up, why = trend_up(v, face_geometry(v, f).normals)
+        up, why = trend_up(v, given.normals)
     sim, plane = level_transform(v, up, 1.0, settings.cloud.ground_percentile)
     levelled = sim.apply(v)
     moved = float(np.abs(levelled[:, 2] - v[:, 2]).max())
     edge = median_edge(v, f)
     if 'cloud.up' not in settings.explicit and (
         moved <= edge
-        or _ground_share(v, f, settings, edge) >= _ground_share(levelled, f, settings, edge)
+        or _ground_share(given, settings, edge)
+        >= _ground_share(face_geometry(levelled, f), settings, edge)
     ):
         return False
     tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
