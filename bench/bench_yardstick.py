@@ -11,18 +11,21 @@ where the bed's open ground reads as the demo pile's reconstructed ground does t
 (``valley_depths``; share of flat faces deeper than ``valley_depth_ratio`` radii at 1, 1.5, 3
 and 4 edge lengths: demo 0.15, 0.17, 0.13, 0.13; bed without relief 0.03, 0.02, 0.04, 0.05; 0.15
 cells 0.06 at each; 0.3 cells 0.12, 0.13, 0.14, 0.12; measured on the cobble bed at 20 edges).
-Then ``segment_mesh`` with the smallest rock of interest set to the material's smallest b (as a
-class check would set it), ``measure_rocks``, and the score against the true label of every face
-(``score_labels``: visible = at least 30 % of the rock's surface seen, one-to-one matches at
-surface IoU >= 0.5). One row per material and resolution; ``edges/b`` is the smallest b over the
-mesh's median edge; ``seconds`` is the CPU time of ``segment_mesh`` and ``measure_rocks`` on one
-thread (which cores shared with other work do not inflate), and their growth with the face count (a
-least-squares power law over the resolutions) ends each material.
+With ``--wave`` the bed lies on uneven ground (``drape``: a wave of that amplitude and
+``--wave-length``, both in units of the largest b; 0: flat). Then the product's
+``segment_and_measure`` with the smallest rock of interest set to the material's smallest b (as
+a class check would set it; regions thinner than a sheet left out as ground), and the score
+against the true label of every face (``score_labels``: visible = at least 30 % of the rock's
+surface seen, one-to-one matches at surface IoU >= 0.5). One row per material and resolution;
+``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU time of
+``segment_and_measure`` on one thread (which cores shared with other work do not inflate), and
+its growth with the face count (a least-squares power law over the resolutions) ends each
+material.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20]
         [--materials aggregate cobble riprap] [--noise 0.2] [--relief 0.3]
-        [--relief-length 3] [--set FIELD=VALUE ...]
+        [--relief-length 3] [--wave 0] [--wave-length 10] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -41,11 +44,17 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from stockpile_ros.segment.measure import measure_rocks  # noqa: E402
+from stockpile_ros.segment.measure import MeasureParams  # noqa: E402
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
-from stockpile_ros.segment.segmentation import segment_mesh  # noqa: E402
+from stockpile_ros.segment.pipeline import segment_and_measure  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import SizedRock, score_labels  # noqa: E402
-from stockpile_ros.tools.sim.bed import MATERIALS, BedConfig, bed_surface, build_bed  # noqa: E402
+from stockpile_ros.tools.sim.bed import (  # noqa: E402
+    MATERIALS,
+    BedConfig,
+    bed_surface,
+    build_bed,
+    drape,
+)
 from stockpile_ros.tools.sim.pile import Gradation  # noqa: E402
 
 
@@ -71,13 +80,16 @@ def main() -> None:
     parser.add_argument('--noise', type=float, default=0.2, help='point noise [Poisson cells]')
     parser.add_argument('--relief', type=float, default=0.3, help='smooth relief [cells]')
     parser.add_argument('--relief-length', type=float, default=3.0, help='its length [cells]')
+    parser.add_argument('--wave', type=float, default=0.0, help='ground wave [largest b]')
+    parser.add_argument('--wave-length', type=float, default=10.0, help='its length [largest b]')
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     overrides = {k: ast.literal_eval(v) for k, v in (s.split('=', 1) for s in args.set)}
     print(f'{args.rocks} rocks per bed, seed {args.seed}, noise {args.noise} cells, relief '
-          f'{args.relief} cells over {args.relief_length}; '
+          f'{args.relief} cells over {args.relief_length}; ground wave {args.wave} largest b over '
+          f'{args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
           'merges splits  |b err| b bias  D50 err  seconds')  # fmt: skip
@@ -94,10 +106,12 @@ def main() -> None:
                 relief_cells=args.relief,
                 relief_length_cells=args.relief_length,
             )
+            if args.wave:
+                surface = drape(surface, args.wave * hi, args.wave_length * hi)
             params = SegmentParams.preset('default', **{'min_rock_b': lo, **overrides})
             t0 = time.process_time()
-            seg = segment_mesh(surface.vertices, surface.faces, params)
-            rocks = measure_rocks(surface.vertices, seg)
+            measured = segment_and_measure(surface.vertices, surface.faces, params, MeasureParams())
+            seg, rocks = measured.segmentation, measured.rocks
             seconds = time.process_time() - t0
             truth = {
                 k: SizedRock(r['b'], r['mass'], r['visible_fraction'])

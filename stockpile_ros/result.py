@@ -312,7 +312,7 @@ class SegmentationRecord(SegmentParams):
         raw_regions: Regions the search grew before the clean-ups.
         segments: Labels after them.
         rocks_measured: Rocks measured (segments too small or flat are not).
-        seconds: Time of the segmentation [s].
+        seconds: Time of the segmentation and the measurement of its rocks [s].
         measure: The measurement parameters.
 
     """

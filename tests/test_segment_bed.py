@@ -7,11 +7,12 @@ import functools
 import numpy as np
 import pytest
 
+from stockpile_ros.errors import StockpileError
 from stockpile_ros.segment.measure import measure_rocks
 from stockpile_ros.segment.params import SegmentParams
 from stockpile_ros.segment.segmentation import segment_mesh
 from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
-from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed
+from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed, drape
 from stockpile_ros.tools.sim.pile import Gradation, PlacedRock
 
 SMALLEST = 0.1
@@ -106,6 +107,20 @@ def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
     assert resolved.precision >= 0.45
     assert resolved.b_error <= 0.12
     assert abs(resolved.d50_error) <= 0.35
+
+
+def test_a_draped_bed_rises_and_falls_with_the_wave_and_keeps_its_truth() -> None:
+    flat = _surface(4.0)
+    wavy = drape(flat, 0.15, 3.0)
+    assert wavy.faces is flat.faces and wavy.labels is flat.labels and wavy.rocks is flat.rocks
+    rise = wavy.vertices[:, 2] - flat.vertices[:, 2]
+    assert np.array_equal(wavy.vertices[:, :2], flat.vertices[:, :2])
+    assert rise.min() >= 0.0 and rise.max() <= 0.3
+    x, y = flat.vertices[:, 0], flat.vertices[:, 1]
+    expected = 0.15 * (1 + np.sin(2 * np.pi * x / 3.0) * np.cos(2 * np.pi * y / 3.0))
+    assert np.allclose(rise, expected)
+    with pytest.raises(StockpileError):
+        drape(flat, 0.15, 0.0)
 
 
 def test_relief_roughens_the_ground_as_dense_matching_does() -> None:

@@ -35,7 +35,7 @@ from .params import SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
-__all__ = ['Analysis', 'analyse_mesh', 'grade', 'principal_axes']
+__all__ = ['Analysis', 'Measured', 'analyse_mesh', 'grade', 'principal_axes', 'segment_and_measure']
 
 
 @dataclass(frozen=True)
@@ -168,6 +168,39 @@ def _rock_record(rock: RockMeasure, orientation_xyzw: list[float], metric: bool)
     )
 
 
+@dataclass(frozen=True)
+class Measured:
+    """What :func:`segment_and_measure` found.
+
+    Attributes:
+        segmentation: The segmentation, the faces of the regions left out relabelled 0 (ground).
+        rocks: The measured rocks.
+        sheets: Regions left out as too thin (``MeasureParams.min_thickness``).
+
+    """
+
+    segmentation: Segmentation
+    rocks: list[RockMeasure]
+    sheets: list[RockMeasure]
+
+
+def segment_and_measure(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    seg_params: SegmentParams,
+    measure_params: MeasureParams,
+    spec: dict[str, Any] | None = None,
+) -> Measured:
+    """Segment a mesh (stockpile frame) and measure its rocks, sheets left out."""
+    seg = segment_mesh(vertices, faces, seg_params, spec)
+    rocks, sheets = split_sheets(measure_rocks(vertices, seg, measure_params), measure_params)
+    if sheets:
+        # Not rocks: their faces go with the ground, in the segmented mesh too.
+        gone = np.isin(seg.labels, [r.id for r in sheets])
+        seg = replace(seg, labels=np.where(gone, 0, seg.labels).astype(seg.labels.dtype))
+    return Measured(seg, rocks, sheets)
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -207,13 +240,9 @@ def analyse_mesh(
     metric = info.scale.metric
     t0 = time.perf_counter()
     # A class's sizes are metres: in model units they would set a meaningless smallest rock.
-    seg = segment_mesh(v, f, sp, spec if metric else None)
+    measured = segment_and_measure(v, f, sp, mp, spec if metric else None)
     t1 = time.perf_counter()
-    rocks, sheets = split_sheets(measure_rocks(v, seg, mp), mp)
-    if sheets:
-        # Not rocks: their faces go with the ground, in the segmented mesh too.
-        gone = np.isin(seg.labels, [r.id for r in sheets])
-        seg = replace(seg, labels=np.where(gone, 0, seg.labels).astype(seg.labels.dtype))
+    seg, rocks = measured.segmentation, measured.rocks
     orientation = principal_axes(v, seg, [r.id for r in rocks])
     identity = [0.0, 0.0, 0.0, 1.0]
     report = Report(
@@ -237,7 +266,7 @@ def analyse_mesh(
         mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
         warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
-        + sheet_warnings(sheets, mp, 'm' if metric else 'model units')
+        + sheet_warnings(measured.sheets, mp, 'm' if metric else 'model units')
         + visibility_warnings(rocks),
     )
     return Analysis(v, f, colors, seg, rocks, report)
