@@ -333,7 +333,7 @@ def drape(surface: BedSurface, amplitude: float, length: float) -> BedSurface:
 
     ``z += amplitude (1 + sin(2 pi x / length) cos(2 pi y / length))``: troughs stay at
     ``z = 0``, crests rise ``2 amplitude``. A vertical shear rather than a bed dropped on the
-    wave: the rocks lean with the ground and stretch along it by ``sqrt(1 + slope^2)`` (under
+    wave: the rocks lean with the ground and stretch along it by ``sqrt(1 + slope^2)`` (about
     2 % at a slope of 0.2), which the truth does not follow.
 
     Args:
