@@ -405,6 +405,22 @@ def test_split_rock_costs_precision_and_counts_as_a_split(tmp_path: Path, truth:
     assert det['false'] == [{'id': 7, 'lies_on': 'rock 1'}]
 
 
+def test_pieces_of_a_barely_visible_rock_count_neither_way(tmp_path: Path, truth: Truth) -> None:
+    mesh = truth.mesh
+    centroids = mesh.vertices[mesh.faces].mean(axis=1)
+    labels = mesh.labels.copy()
+    five = labels == 5
+    labels[five & (centroids[:, 0] > np.median(centroids[five, 0]))] = 7
+    piece = copy.deepcopy(truth.data['rocks'][4])
+    piece['id'] = 7
+    rocks = [*truth.data['rocks'], piece]
+    result = make_result(tmp_path, truth, 'hidden-split', labels=labels, rocks=rocks)
+    det = evaluate(result, truth.path)['detection']
+    assert [f['lies_on'] for f in det['false']] == ['rock 5']
+    assert det['precision'] == pytest.approx(5 / 6)
+    assert (det['precision_visible'], det['recall_visible']) == (1.0, 1.0)
+
+
 def test_missing_rocks_cost_recall_only_when_visible(tmp_path: Path, truth: Truth) -> None:
     labels = truth.mesh.labels.copy()
     labels[np.isin(labels, [4, 5])] = 0

@@ -73,8 +73,13 @@ def test_perfect_labels_score_perfectly_and_a_merge_does_not() -> None:
     same = score_labels(true_labels, true_labels, areas, truth, truth)
     assert (same.visible, same.found, same.recall, same.precision) == (2, 2, 1.0, 1.0)
     assert same.b_error == 0.0
-    # Rock 3 is barely visible: its match counts neither way.
+    # Rock 3 is barely visible: its match counts neither way, and nor would its pieces.
     assert same.reported == 3
+    halves, pieces = np.array([1, 1, 2, 2, 2, 3, 3, 0]), np.array([1, 1, 2, 2, 2, 3, 4, 0])
+    measured = {**truth, 4: SizedRock(0.5, 0.1)}
+    split = score_labels(halves, pieces, np.ones(8), truth, measured)
+    assert (split.found, split.reported, split.precision) == (2, 4, 1.0)
+    assert split.d50_true == same.d50_true != same.d50_true_visible
     merged = np.array([1, 1, 1, 1, 1, 3, 0])
     score = score_labels(true_labels, merged, areas, truth, {1: SizedRock(2.0, 9.0), 3: truth[3]})
     assert (score.found, score.merges) == (1, 1)
@@ -87,8 +92,9 @@ def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
     # 8 edges across the smallest b, under the default floor of 20 edges: with it, the rocks
     # under 20 edges are fragments and 6 of 61 visible rocks are found. With the floor at 4 edges,
     # measured when written: 32 of 61 found, precision 0.52, median b error 9.4 %, D50 +26 %
-    # (the failures are touching rocks taken as one). The bounds catch a step back, not the goal
-    # (bench/bench_yardstick.py).
+    # (the failures are touching rocks taken as one); after 64f7826, 36 found, precision 0.59, D50
+    # +38 % against every true rock (+24 % against the visible ones). The bounds catch a step
+    # back, not the goal (bench/bench_yardstick.py).
     surface = _surface(8.0)
     truth = _truth(surface)
 
@@ -106,7 +112,7 @@ def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
     assert resolved.recall >= 0.45
     assert resolved.precision >= 0.45
     assert resolved.b_error <= 0.12
-    assert abs(resolved.d50_error) <= 0.35
+    assert abs(resolved.d50_error) <= 0.5
 
 
 def test_a_draped_bed_rises_and_falls_with_the_wave_and_keeps_its_truth() -> None:

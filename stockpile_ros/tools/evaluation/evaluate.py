@@ -130,10 +130,9 @@ def _detection_dict(
     detected = {p[1] for p in matching.pairs}
     visible_ids = [t for t in truth.rocks if visible(t)]
     tp_visible = sum(1 for t in detected if visible(t))
-    tp_hidden = len(detected) - tp_visible
     n_true, n_result = len(truth.rocks), len(result.rocks)
-    # Matches to barely visible rocks are neither right nor wrong for the "visible" figures.
-    n_result_visible = n_result - tp_hidden
+    hidden = {t for t in truth.rocks if not visible(t)}
+    n_result_visible = n_result - len(matching.on_hidden(hidden, options.match.major_share))
     total_area = float(areas.sum())
     off_area = float(areas[true_labels == OFF_SURFACE].sum())
     listed = np.isin(result.mesh.labels, list(result.rocks))

@@ -5,7 +5,10 @@ Where the true rock under every face is known (a simulated surface meshed direct
 label is given, and the matching is the one ``stockpile evaluate`` uses (``match_rocks``: one to
 one, surface IoU at least ``min_iou``), with each face a piece of its own. The figures are those of
 ``evaluate``'s visible detection and sizes: true rocks under ``visible_threshold`` are neither
-missed when undetected nor counted against precision when found.
+missed when undetected nor counted against precision when found, whole or in pieces
+(``RockMatching.on_hidden``). The true D50 is, as in ``evaluate`` (``truth.json``'s gradation),
+that of every true rock, the reported one that of every reported rock; the D50 of the visible
+true rocks is given beside it.
 """
 
 from __future__ import annotations
@@ -47,14 +50,17 @@ class LabelScore:
         reported: Measured rocks.
         found: Visible true rocks matched one to one.
         recall: ``found / visible``.
-        precision: ``found`` over the reported rocks not matched to a less visible rock.
+        precision: ``found`` over the reported rocks not about a less visible rock.
         merges: Reported rocks holding most of two or more true rocks.
         splits: True rocks cut into two or more reported rocks.
         b_error: Median of ``|b / b_true - 1|`` over the found rocks.
         b_bias: Median of ``b / b_true - 1`` over the found rocks.
-        d50_true: D50 by mass (of b) of the visible true rocks [m].
+        d50_true: D50 by mass (of b) of every true rock [m].
         d50: D50 by mass of the reported rocks [m].
         d50_error: ``d50 / d50_true - 1``.
+        d50_true_visible: D50 by mass of the visible true rocks [m].
+        d50_error_visible: ``d50 / d50_true_visible - 1``: the reported rocks include the
+            barely visible ones found, so this is not like for like.
 
     """
 
@@ -70,6 +76,8 @@ class LabelScore:
     d50_true: float
     d50: float
     d50_error: float
+    d50_true_visible: float
+    d50_error_visible: float
 
 
 def _d50(rocks: list[SizedRock]) -> float:
@@ -104,11 +112,12 @@ def score_labels(
     matching = match_rocks(labels, transfer, result_ids, true_ids, opt)
     visible = {k for k, r in truth.items() if r.visible_fraction >= opt.visible_threshold}
     found = [(r, k) for r, k, _ in matching.pairs if k in visible]
-    hidden = len(matching.pairs) - len(found)
+    about_hidden = matching.on_hidden(set(truth) - visible, opt.major_share)
     rel = np.array([measured[r].b / truth[k].b - 1.0 for r, k in found])
-    d50_true = _d50([truth[k] for k in visible])
+    d50_true = _d50(list(truth.values()))
+    d50_visible = _d50([truth[k] for k in visible])
     d50 = _d50(list(measured.values()))
-    counted = len(measured) - hidden
+    counted = len(measured) - len(about_hidden)
     return LabelScore(
         visible=len(visible),
         reported=len(measured),
@@ -122,4 +131,6 @@ def score_labels(
         d50_true=d50_true,
         d50=d50,
         d50_error=d50 / d50_true - 1.0,
+        d50_true_visible=d50_visible,
+        d50_error_visible=d50 / d50_visible - 1.0,
     )

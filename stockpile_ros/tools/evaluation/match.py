@@ -166,10 +166,12 @@ class MatchOptions:
         min_iou: A result rock and a true rock match only when the intersection over union of
             their surfaces (on the result mesh) is at least this.
         visible_threshold: True rocks with a visible fraction below this are not counted as
-            missed when undetected, and are left out of the "visible" precision and recall.
+            missed when undetected, and are left out of the "visible" precision and recall,
+            with the result rocks about them (``RockMatching.on_hidden``).
         major_share: A merge is a result rock holding at least this share of the reconstructed
             surface of two or more true rocks; a split is a true rock on which two or more result
-            rocks lie with at least this share of their own surface.
+            rocks lie with at least this share of their own surface. A result rock with this
+            share on one barely visible rock is about that rock.
         minor_share: ...provided each piece is at least this share of the other side (the
             result rock for a merge, the true rock for a split), so that slivers do not count.
 
@@ -210,6 +212,28 @@ class RockMatching:
     merges: dict[int, list[int]] = field(default_factory=dict)
     splits: dict[int, list[int]] = field(default_factory=dict)
     false_reasons: dict[int, str] = field(default_factory=dict)
+
+    def on_hidden(self, hidden: set[int], share: float) -> list[int]:
+        """Return the result rocks that are about barely visible true rocks, right or wrong.
+
+        A result rock matched to one of ``hidden``, or unmatched with at least ``share`` of its
+        surface on one of them (a piece of a rock the camera barely saw), is neither a hit nor
+        a false rock for figures over the visible rocks: without the second half, finding a
+        barely visible rock whole counted nothing while finding it in two pieces counted two
+        false rocks.
+        """
+        cols = [j for j, t in enumerate(self.true_ids) if t in hidden]
+        matched = {r: t for r, t, _ in self.pairs}
+        out = []
+        for i, rid in enumerate(self.result_ids):
+            if rid in matched:
+                about = matched[rid] in hidden
+            else:
+                on = self.overlap[i, cols].max() if cols else 0.0
+                about = bool(self.result_area[i] > 0 and on >= share * self.result_area[i])
+            if about:
+                out.append(rid)
+        return out
 
 
 def _share(num: FloatArray, den: FloatArray) -> FloatArray:
