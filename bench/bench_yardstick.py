@@ -1,4 +1,4 @@
-"""A yardstick that looks like the field: beds of hundreds of rocks per material, meshed at 4-20
+"""A yardstick that looks like the field: beds of hundreds of rocks per material, meshed at 4-30
 edges across the smallest rock's b, segmented and measured with the default mode.
 
 Per material (``stockpile_ros.tools.sim.bed.MATERIALS``: aggregate 20-80 mm, cobble 0.1-0.3 m,
@@ -25,7 +25,7 @@ its growth with the face count (a least-squares power law over the resolutions) 
 material.
 
 Usage:
-    .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20]
+    .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--noise 0.2] [--relief 0.3]
         [--relief-length 3] [--wave 0] [--wave-length 10] [--set FIELD=VALUE ...]
 """
@@ -77,7 +77,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rocks', type=int, default=300)
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--edges', type=float, nargs='+', default=[4.0, 8.0, 12.0, 20.0])
+    parser.add_argument('--edges', type=float, nargs='+', default=[4.0, 8.0, 12.0, 20.0, 30.0])
     parser.add_argument('--materials', nargs='+', default=list(MATERIALS), choices=list(MATERIALS))
     parser.add_argument('--noise', type=float, default=0.2, help='point noise [Poisson cells]')
     parser.add_argument('--relief', type=float, default=0.3, help='smooth relief [cells]')
