@@ -16,6 +16,7 @@ from stockpile_ros.segment.gradation import load_class_table
 from stockpile_ros.segment.measure import MeasureParams, measure_rocks
 from stockpile_ros.segment.params import (
     RESOLVABLE_EDGES,
+    SHARP_EDGES,
     SegmentParams,
     class_min_rock_b,
     median_edge,
@@ -162,6 +163,23 @@ def test_a_class_finer_than_the_mesh_is_warned_about() -> None:
     warned = analyse_mesh(v, f, spec=spec, mesh_info=metric).report.warnings
     assert any('the mesh resolves' in w for w in warned)
     assert not any('the mesh resolves' in w for w in analyse_mesh(v, f).report.warnings)
+
+
+def test_a_rock_of_interest_under_sharp_edges_is_warned_about() -> None:
+    v, f = _bumps(3, 32)
+    edge = median_edge(v, f)
+    metric = MeshInfo(ScaleRecord('target', 1.0, 0.01), units='m')
+
+    def warned(edges: float) -> bool:
+        params = SegmentParams(min_rock_b=edges * edge)
+        report = analyse_mesh(v, f, seg_params=params, mesh_info=metric).report
+        return any('to edges of' in w for w in report.warnings)
+
+    # Resolved (over min_rock_edges) but under SHARP_EDGES: warned; at or over it, or with no
+    # rock of interest asked for, not.
+    assert warned(0.8 * SHARP_EDGES)
+    assert not warned(1.1 * SHARP_EDGES)
+    assert not any('to edges of' in w for w in analyse_mesh(v, f).report.warnings)
 
 
 def test_fragments_are_judged_by_area_not_by_face_count() -> None:

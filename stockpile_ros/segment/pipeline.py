@@ -31,7 +31,7 @@ from .measure import (
     split_sheets,
     visibility_warnings,
 )
-from .params import SegmentParams
+from .params import SHARP_EDGES, SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
@@ -102,15 +102,28 @@ def principal_axes(
 
 
 def _resolution_warnings(seg: Segmentation) -> list[str]:
-    """Return a warning when the smallest rock of interest asked for is finer than the mesh."""
+    """Return a warning when the smallest rock of interest asked for is finer than the mesh.
+
+    Under ``min_rock_edges`` the mesh does not resolve it; under ``SHARP_EDGES`` it does, but
+    rocks are joined to their neighbours more often than a check should accept.
+    """
     scale = seg.scale
-    if scale.requested >= scale.min_rock_b:
+    if scale.requested < scale.min_rock_b:
+        return [
+            f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, '
+            f'under the {seg.params.min_rock_edges:g} median edge lengths '
+            f'({scale.min_rock_b:.3f} m) the mesh resolves: rocks under that size may be joined '
+            'to a neighbour. Capture the pile closer, or reconstruct it finer.'
+        ]
+    across = scale.requested / scale.edge if scale.edge > 0 else float('inf')
+    if scale.source == 'mesh' or across >= SHARP_EDGES:
         return []
     return [
-        f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, under '
-        f'the {seg.params.min_rock_edges:g} median edge lengths ({scale.min_rock_b:.3f} m) the '
-        'mesh resolves: rocks under that size may be joined to a neighbour. Capture the pile '
-        'closer, or reconstruct it finer.'
+        f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, '
+        f'{across:.0f} median edge lengths of the mesh: on simulated beds of 300 rocks, '
+        f'recall was 0.78-0.89 at 20 edge lengths and 0.87-0.93 at {SHARP_EDGES:g}, the lost '
+        'rocks joined to a neighbour. For a check, capture the pile closer or reconstruct it '
+        f'finer, to edges of {scale.requested / SHARP_EDGES:.3g} m or less.'
     ]
 
 
