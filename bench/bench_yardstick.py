@@ -13,8 +13,10 @@ and 4 edge lengths: demo 0.15, 0.17, 0.13, 0.13; bed without relief 0.03, 0.02, 
 cells 0.06 at each; 0.3 cells 0.12, 0.13, 0.14, 0.12; measured on the cobble bed at 20 edges).
 With ``--wave`` the bed lies on uneven ground (``drape``: a wave of that amplitude and
 ``--wave-length``, both in units of the largest b; 0: flat). Then the product's
-``segment_and_measure`` with the smallest rock of interest set to the material's smallest b (as
-a class check would set it; regions thinner than a sheet left out as ground), and the score
+``segment_and_measure`` with the smallest and largest rocks set to the material's smallest and
+largest b (as a class check would set them; open ground off the plane found as bare patches wider
+than the largest rock, ``stockpile_ros.segment.ground``; regions thinner than a sheet left out
+as ground), and the score
 against the true label of every face (``score_labels``: visible = at least 30 % of the rock's
 surface seen, one-to-one matches at surface IoU >= 0.5, reported rocks about barely visible ones
 counted neither way; the D50 error against every true rock, as ``stockpile evaluate`` scores it,
@@ -110,7 +112,9 @@ def main() -> None:
             )
             if args.wave:
                 surface = drape(surface, args.wave * hi, args.wave_length * hi)
-            params = SegmentParams.preset('default', **{'min_rock_b': lo, **overrides})
+            params = SegmentParams.preset(
+                'default', **{'min_rock_b': lo, 'max_rock_b': hi, **overrides}
+            )
             t0 = time.process_time()
             measured = segment_and_measure(surface.vertices, surface.faces, params, MeasureParams())
             seg, rocks = measured.segmentation, measured.rocks

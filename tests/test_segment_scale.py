@@ -18,6 +18,7 @@ from stockpile_ros.segment.params import (
     RESOLVABLE_EDGES,
     SHARP_EDGES,
     SegmentParams,
+    class_max_rock_b,
     class_min_rock_b,
     median_edge,
     rock_scale,
@@ -134,6 +135,11 @@ def test_the_smallest_rock_comes_from_the_parameter_the_class_or_the_mesh() -> N
     assert from_class.requested == from_class.min_rock_b
     given = rock_scale(replace(params, min_rock_b=0.3), 0.001, spec)
     assert (given.source, given.min_rock_b) == ('parameter', 0.3)
+    # The largest rock: the parameter, else the class's largest upper limit (D100 at most 12 in).
+    assert class_max_rock_b(spec) == pytest.approx(12 * 0.0254)
+    assert from_class.max_rock_b == pytest.approx(12 * 0.0254)
+    assert rock_scale(replace(params, max_rock_b=0.5), 0.001, spec).max_rock_b == 0.5
+    assert mesh.max_rock_b == 0.0
 
 
 def test_no_scale_goes_under_what_the_mesh_resolves() -> None:

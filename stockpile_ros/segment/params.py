@@ -26,6 +26,7 @@ __all__ = [
     'Mode',
     'RockScale',
     'SegmentParams',
+    'class_max_rock_b',
     'class_min_rock_b',
     'median_edge',
     'rock_scale',
@@ -96,6 +97,16 @@ class SegmentParams:
             edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
             a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
             bench/bench_scale.py's piles)].
+        max_rock_b: Intermediate dimension b of the largest rock on the pile [m]; 0: the largest
+            upper size limit of the class being checked when a class is checked, else unknown,
+            and then the ground is the plane ``z = 0`` alone. Sets the open ground that follows
+            the site (see ``ground_window_b``).
+        ground_window_b: Width of the bare patch that open ground off the plane must hold, wider
+            than any rock's plan (see :mod:`.ground`) [in units of ``max_rock_b``; 0: the plane
+            alone]. On bench/bench_yardstick.py's riprap bed (0.3-1.5 m) over ground waving by
+            half the largest b, at 12 edges across the smallest b: 1.0 and 1.25 found 81 % and
+            74 % of the bare ground off the plane, calling 0.3 % and 0.2 % of the rock faces
+            ground; 1.7 found 55 %, 2.3 none (no bare patch of that bed is wider).
         ground_min_nz: Smallest normal z component of a ground face (0: any face that does not
             face down; the skirt Poisson puts round the foot of a rock slopes).
         min_region_share: Regions of less area than this share of the plan area of the smallest
@@ -195,6 +206,8 @@ class SegmentParams:
     min_rock_b: Annotated[float, Range(0.0, 100.0)] = 0.0
     min_rock_edges: Annotated[float, Range(RESOLVABLE_EDGES, 10_000.0)] = 20.0
     ground_tolerance_edges: Annotated[float, Range(0.0, 1000.0)] = 2.0
+    max_rock_b: Annotated[float, Range(0.0, 100.0)] = 0.0
+    ground_window_b: Annotated[float, Range(0.0, 100.0)] = 1.25
     ground_min_nz: Annotated[float, Range(0.0, 1.0)] = 0.0
     min_region_share: Annotated[float, Range(0.0, 100.0)] = 1.0
     merge_fragments: bool = True
@@ -251,6 +264,7 @@ class RockScale:
             the mesh does not resolve it (see ``SegmentParams.min_rock_edges``).
         valley_radius: Scale of the valley faces (``SegmentParams.valley_radius_b``) [m].
         split_radius: Scale of the valleys that split a region (``split_radius_b``) [m].
+        max_rock_b: Intermediate dimension b of the largest rock on the pile [m]; 0: unknown.
 
     """
 
@@ -260,6 +274,7 @@ class RockScale:
     requested: float
     valley_radius: float
     split_radius: float
+    max_rock_b: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict for report.json."""
@@ -295,13 +310,29 @@ def class_min_rock_b(spec: Mapping[str, Any]) -> float | None:
     return CLASS_MIN_SHARE * min(lows) if lows else None
 
 
+def class_max_rock_b(spec: Mapping[str, Any]) -> float | None:
+    """Largest rock a class allows: its largest upper size limit.
+
+    Args:
+        spec: A class entry of the class table (``limits`` in metres, see ``load_class_table``).
+
+    Returns:
+        The largest upper limit [m], None when the class has none.
+
+    """
+    highs = [float(hi) for _, hi in spec.get('limits', {}).values() if hi is not None]
+    return max(highs) if highs else None
+
+
 def rock_scale(
     params: SegmentParams, edge: float, spec: Mapping[str, Any] | None = None
 ) -> RockScale:
     """Return the smallest rock of interest: ``min_rock_b``, else the class's, else the mesh's.
 
+    The largest rock is ``max_rock_b``, else the class's largest upper limit, else unknown (0).
+
     Args:
-        params: ``min_rock_b`` (0: not given) and ``min_rock_edges``.
+        params: ``min_rock_b``, ``max_rock_b`` (0: not given) and ``min_rock_edges``.
         edge: The mesh's median edge length [m].
         spec: The class being checked, or None.
 
@@ -319,6 +350,7 @@ def rock_scale(
     elif from_class is not None:
         source, requested = 'class', from_class
     b = max(requested, floor)
+    largest = params.max_rock_b or (class_max_rock_b(spec) if spec is not None else None) or 0.0
     return RockScale(
         edge,
         b,
@@ -326,4 +358,5 @@ def rock_scale(
         requested,
         max(params.valley_radius_b * b, params.valley_min_edges * edge),
         max(params.split_radius_b * b, params.split_min_edges * edge),
+        largest,
     )

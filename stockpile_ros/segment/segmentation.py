@@ -53,6 +53,7 @@ import numpy.typing as npt
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .cleanup import drop_facing_down, hand_back, merge_convex_borders, merge_fragments
 from .criterion import edge_scores
+from .ground import open_ground
 from .params import RINGS_PER_EDGE, RockScale, SegmentParams, median_edge, rock_scale
 from .region import grow_regions
 from .valleys import smooth_normals, split_at_valleys, valley_depths
@@ -130,10 +131,12 @@ def segment_mesh(
     normals = smooth_normals(geom, adj, p.normal_smoothing)
     active = np.ones(m, dtype=bool)
     if p.exclude_ground:
-        ground = (geom.centroids[:, 2] < p.ground_tolerance_edges * edge) & (
-            normals[:, 2] >= p.ground_min_nz
+        tolerance = p.ground_tolerance_edges * edge
+        window = p.ground_window_b * scale.max_rock_b
+        on_ground = (geom.centroids[:, 2] < tolerance) | open_ground(
+            geom.centroids, window, edge, tolerance
         )
-        active &= ~ground
+        active &= ~(on_ground & (normals[:, 2] >= p.ground_min_nz))
     # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's. A
     # mesh without a length (every edge degenerate) has no scale to look for valleys at.
     valley_radius, split_radius = scale.valley_radius, scale.split_radius

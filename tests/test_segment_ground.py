@@ -1,0 +1,78 @@
+"""Open ground off the plane: bare patches wider than the largest rock, at any height."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from segment_fixtures import height_field
+
+from stockpile_ros.artefacts import MeshInfo, ScaleRecord
+from stockpile_ros.segment.ground import open_ground
+from stockpile_ros.segment.params import SegmentParams
+from stockpile_ros.segment.pipeline import analyse_mesh
+
+F64 = npt.NDArray[np.float64]
+RADIUS = 0.15
+
+
+def _scene() -> tuple[F64, npt.NDArray[np.bool_], F64]:
+    """Domes of b 0.3 m on ground rising 0.6 m across 4 m, sampled about every 1.5 cm."""
+    rng = np.random.default_rng(0)
+    x, y = (g.ravel() for g in np.meshgrid(np.arange(0, 4, 0.015), np.arange(0, 4, 0.015)))
+    x, y = x + rng.uniform(0, 0.01, x.size), y + rng.uniform(0, 0.01, y.size)
+    ground = 0.3 * np.sin(x / 1.5)
+    z = ground.copy()
+    for cx, cy in rng.uniform(0.3, 3.7, (15, 2)):
+        r2 = (x - cx) ** 2 + (y - cy) ** 2
+        z = np.maximum(z, ground + np.sqrt(np.clip(RADIUS**2 - r2, 0, None)))
+    rock = z - ground > 0.04
+    return np.stack([x, y, z], axis=1), rock, ground
+
+
+def test_open_ground_follows_the_site_and_leaves_rocks_out() -> None:
+    points, rock, _ = _scene()
+    found = open_ground(points, 0.4, 0.02, 0.04)
+    assert found[~rock].mean() > 0.95
+    assert found[rock].mean() < 0.01
+    # No bare patch of the 4 m survey holds a square wider than it.
+    assert not open_ground(points, 4.5, 0.02, 0.04).any()
+    assert not open_ground(points, 0.0, 0.02, 0.04).any()
+
+
+def test_a_rock_at_the_edge_of_the_survey_is_not_ground() -> None:
+    points, rock, _ = _scene()
+    # Cut the survey to a disc: squares hanging out over its edge would rest on rocks there.
+    kept = np.hypot(points[:, 0] - 2, points[:, 1] - 2) < 1.9
+    found = open_ground(points[kept], 0.4, 0.02, 0.04)
+    assert found[rock[kept]].mean() < 0.01
+    assert found[~rock[kept]].mean() > 0.9
+
+
+def test_ground_off_the_plane_is_left_out_when_the_largest_rock_is_known() -> None:
+    # Four boulders of b 0.4 m on ground rising 12 cm over a 4 m period: off z = 0 by more
+    # than the ground tolerance (2 edges, 2.8 cm), so without a largest rock it is searched.
+    centres = [(x, y) for x in (-0.6, 0.6) for y in (-0.6, 0.6)]
+
+    def ground(x: F64, y: F64) -> F64:
+        return np.asarray(0.06 * (np.sin(2 * np.pi * x / 4.0) * np.cos(2 * np.pi * y / 4.0) + 1))
+
+    def surface(x: F64, y: F64) -> F64:
+        z = ground(x, y)
+        for cx, cy in centres:
+            cap = float(ground(np.array(cx), np.array(cy))) + 0.7 * np.sqrt(
+                np.clip(0.2**2 - (x - cx) ** 2 - (y - cy) ** 2, 0, None)
+            )
+            z = np.where((x - cx) ** 2 + (y - cy) ** 2 < 0.2**2, np.maximum(z, cap), z)
+        return z
+
+    v, f = height_field(surface, 1.4, 200)
+    info = MeshInfo(ScaleRecord('given', 1.0), units='m')
+    plane = analyse_mesh(v, f, mesh_info=info)
+    assert any('2.79 x 2.79 m' in w for w in plane.report.warnings)  # the ground, as a sheet
+    assert plane.segmentation.scale.max_rock_b == 0.0
+    known = analyse_mesh(v, f, seg_params=SegmentParams(max_rock_b=0.4), mesh_info=info)
+    assert known.segmentation.scale.max_rock_b == 0.4
+    assert len(known.rocks) == len(centres)
+    assert all(r.b == pytest.approx(0.4, rel=0.1) for r in known.rocks)
+    assert not any('2.79 x 2.79 m' in w for w in known.report.warnings)
