@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 import pytest
-from segment_fixtures import height_field, small_pile
+from segment_fixtures import boulders_on, height_field, small_pile
 
 from stockpile_ros.artefacts import MeshInfo, ScaleRecord
 from stockpile_ros.segment.adjacency import FaceAdjacency
@@ -223,16 +223,7 @@ def test_ground_off_the_plane_is_left_out_as_a_sheet_with_a_warning() -> None:
     def ground(x: F64, y: F64) -> F64:
         return np.asarray(0.03 * (np.sin(2 * np.pi * x / 1.3) * np.cos(2 * np.pi * y / 1.1) + 1))
 
-    def surface(x: F64, y: F64) -> F64:
-        z = ground(x, y)
-        for cx, cy in centres:
-            cap = float(ground(np.array(cx), np.array(cy))) + 0.7 * np.sqrt(
-                np.clip(0.2**2 - (x - cx) ** 2 - (y - cy) ** 2, 0, None)
-            )
-            z = np.where((x - cx) ** 2 + (y - cy) ** 2 < 0.2**2, np.maximum(z, cap), z)
-        return z
-
-    v, f = height_field(surface, 1.4, 200)
+    v, f = boulders_on(ground, centres)
     info = MeshInfo(ScaleRecord('given', 1.0), units='m')
     kept = analyse_mesh(v, f, mesh_info=info, measure_params=MeasureParams(min_thickness=0.0))
     assert max(r.b for r in kept.rocks) > 1.0  # the crests, measured as a rock

@@ -9,9 +9,9 @@ and open ground is a surface on which a square wider than every rock lies flat.
 So the surface is taken from above on a grid of ``cell`` (its lowest point per cell), and its
 lower envelope is a grey opening ``window`` wide: the highest a dome that wide (see ``SHEET``) can
 be pushed up from below, which goes into no rock narrower than it and follows ground that curves
-more gently than the dome. A point is ground where it lies within ``tolerance`` of that envelope in
-a connected patch of such cells that holds a ``window`` square (``RESTING`` of it): the floors of
-the narrow crevices between rocks also touch the envelope, and they are not ground.
+more gently than the dome. Open ground is found where cells lie within ``tolerance`` of that
+envelope in a connected patch that holds a ``window`` square (``RESTING`` of it): the floors of
+the narrow crevices between rocks also touch the envelope, and they do not make a patch.
 
 The dome must rest on the surface: past the edge of a survey nothing holds it up, and a dome
 hanging out over the edge would rest on the top of whatever rock lies there (``RESTING``). Cells
@@ -24,7 +24,8 @@ fitted with a smooth surface (a quadratic over a Gaussian neighbourhood ``TREND`
 which bridges ridges from the ground found on both sides, and ground is taken again as the cells
 within the tolerance of it that join ground already found, ``REFITS`` times. The fit reaches only
 where found ground weighs at least ``SUPPORT`` of its neighbourhood, so it does not extrapolate
-under a pile.
+far under a pile. That surface is the ground where it reaches, in place of the plane: a face
+within the tolerance of it is ground, and a rock's base rests on it.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ __all__ = [
     'SHEET',
     'SUPPORT',
     'TREND',
-    'open_ground',
+    'ground_height',
 ]
 
 HOLE_CELLS = 2
@@ -124,24 +125,23 @@ def _opening(z: F64, half: int, drop: float, outside: npt.NDArray[np.bool_]) -> 
     return eroded
 
 
-def open_ground(
-    points: npt.ArrayLike, window: float, cell: float, tolerance: float
-) -> npt.NDArray[np.bool_]:
-    """Which points lie on open ground (see the module documentation).
+def ground_height(points: npt.ArrayLike, window: float, cell: float, tolerance: float) -> F64:
+    """Height of the open ground under each point (see the module documentation).
 
     Args:
         points: Nx3 positions, z up [m].
         window: Side of the square open ground must hold, wider than the largest rock's b [m].
         cell: Grid cell seen from above [m]; about the mesh's edge length.
-        tolerance: Height over the lower envelope under which a point is on it [m].
+        tolerance: Height over the ground under which a point is on it [m].
 
     Returns:
-        N booleans; all False when ``window`` or ``cell`` is not positive or there is no point.
+        N heights of the surface fitted to the open ground found [m]; NaN where it does not
+        reach, everywhere when no patch is found or ``window`` or ``cell`` is not positive.
 
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if window <= 0 or cell <= 0 or not len(p):
-        return np.zeros(len(p), dtype=bool)
+        return np.full(len(p), np.nan)
     ij = np.floor((p[:, :2] - p[:, :2].min(axis=0)) / cell).astype(np.int64)
     shape = tuple(int(n) for n in ij.max(axis=0) + 1)
     flat = ij[:, 0] * shape[1] + ij[:, 1]
@@ -165,7 +165,7 @@ def open_ground(
         >= RESTING - 1e-9
     )
     found = _joining(near, wide)
-    surface = envelope
+    surface = np.full(low.shape, -np.inf)
     for _ in range(REFITS if found.any() else 0):
         surface = _trend(
             low,
@@ -173,10 +173,10 @@ def open_ground(
             max(1, round(window / (FIT_CELLS * cell))),
             TREND * FIT_CELLS,
         )
-        near = _within(low, surface, tolerance, outside)
-        found = _joining(near, found)
-    on: npt.NDArray[np.bool_] = found.ravel()[flat] & (p[:, 2] - surface.ravel()[flat] <= tolerance)
-    return on
+        found = _joining(_within(low, surface, tolerance, outside), found)
+    height: F64 = surface.ravel()[flat]
+    height[np.isinf(height)] = np.nan
+    return height
 
 
 def _within(low: F64, surface: F64, tolerance: float, outside: npt.NDArray[np.bool_]) -> Mask:

@@ -18,10 +18,13 @@ an explicit rule (``completion``):
   the convex hull of both halves is the rock. The plane sits at the rock's widest visible horizontal
   section or at the median height of its rim (where the visible surface ends), whichever is higher:
   a rock seen only as a cap is assumed as deep below its rim as it rises above it, a rock seen past
-  its equator symmetric about the equator. Reflected points are clamped to the ground plane
-  ``z = 0``.
-* ``"ground"``: the convex hull of the visible surface and its vertical projection onto ``z = 0``
-  (a column down to the ground; an upper bound for rocks resting on others).
+  its equator symmetric about the equator. Reflected points are clamped to the ground.
+* ``"ground"``: the convex hull of the visible surface and its vertical projection onto the ground
+  (a column down to it; an upper bound for rocks resting on others).
+
+The ground under a rock is the plane ``z = 0``, or the open ground found under it where the
+largest rock is known (``Segmentation.ground``, see :mod:`.ground`): its height is the median of
+that ground under the rock's faces, and heights above are taken from it.
 * ``"auto"`` (default): ``"mirror"`` for a rock whose visible surface is under ``PARTLY_SEEN`` of
   the area of its hull (the flat faces that close the hull are then most of it, and mostly
   guesswork), ``"hull"`` for the others. On seven reconstructed simulator piles this
@@ -176,14 +179,20 @@ def _mirror_height(points: F64, rim: F64, bins: int) -> float:
     return max(widest, rim_z)
 
 
+def _base(under: F64) -> float:
+    """Height of the ground under a rock from the open ground under its faces, else 0."""
+    known = under[~np.isnan(under)]
+    return float(np.median(known)) if len(known) else 0.0
+
+
 def complete_rock(
     points: F64, rim: F64, completion: CompletionRule, bins: int, ground_contact: float
 ) -> F64:
     """Points whose convex hull is the completed rock (see the module documentation).
 
     Args:
-        points: Visible surface points [m].
-        rim: Points on the rim of the visible surface [m].
+        points: Visible surface points, over the ground under the rock at ``z = 0`` [m].
+        rim: Points on the rim of the visible surface, as ``points`` [m].
         completion: The rule.
         bins: Horizontal slices used to find the widest visible section.
         ground_contact: Height under which a lowest visible point rests on the ground [m].
@@ -270,7 +279,12 @@ def measure_rocks(
         else:
             rule = p.completion
         hull, centroid, volume = seen, seen_centroid, seen_volume
-        completed = complete_rock(pts, v[_rim_vertices(tri)], rule, p.height_bins, contact)
+        # Completion works over the ground under the rock: the plane, or open ground found.
+        lift = np.array([0.0, 0.0, _base(seg.ground[idx])])
+        completed = (
+            complete_rock(pts - lift, v[_rim_vertices(tri)] - lift, rule, p.height_bins, contact)
+            + lift
+        )
         if len(completed) > len(pts):
             with contextlib.suppress(QhullError, ValueError):
                 hull = ConvexHull(completed)

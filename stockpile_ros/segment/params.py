@@ -93,10 +93,11 @@ class SegmentParams:
             (12-55 cm2, square roots of 9-19 edge lengths, on the demo pile): a class-derived
             ``min_rock_b`` of 12 edge lengths (class I on the demo pile, 3.8 mm edges) took the
             result from 14 to 18 rocks there even with every other floor; 20 kept 14.
-        ground_tolerance_edges: Height above ``z = 0`` under which a face is ground [in median
-            edge lengths; 2 is the 1 cm fitted on reconstructed piles at the 4-5 mm median edge of
-            a depth-9 Poisson mesh of a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on
-            bench/bench_scale.py's piles)].
+        ground_tolerance_edges: Height above the ground (``z = 0``, or the open ground found, see
+            ``max_rock_b``) under which a face is ground [in median edge lengths; 2 is the 1 cm
+            fitted on reconstructed piles at the 4-5 mm median edge of a depth-9 Poisson mesh of
+            a simulator scene (4.3 mm on the demo scene, 3.4-4.9 mm on bench/bench_scale.py's
+            piles)].
         max_rock_b: Intermediate dimension b of the largest rock on the pile [m]; 0: the largest
             upper size limit of the class being checked when a class is checked, else unknown,
             and then the ground is the plane ``z = 0`` alone. Sets the open ground that follows

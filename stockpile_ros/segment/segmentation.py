@@ -53,7 +53,7 @@ import numpy.typing as npt
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .cleanup import drop_facing_down, hand_back, merge_convex_borders, merge_fragments
 from .criterion import edge_scores
-from .ground import open_ground
+from .ground import ground_height
 from .params import RINGS_PER_EDGE, RockScale, SegmentParams, median_edge, rock_scale
 from .region import grow_regions
 from .valleys import smooth_normals, split_at_valleys, valley_depths
@@ -61,6 +61,7 @@ from .valleys import smooth_normals, split_at_valleys, valley_depths
 __all__ = ['Segmentation', 'segment_mesh']
 
 I32 = npt.NDArray[np.int32]
+F64 = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,8 @@ class Segmentation:
         params: The parameters used.
         scale: The mesh's edge length and the smallest rock of interest the lengths of ``params``
             are multiples of.
+        ground: Per face, the height of the open ground under it (``ground_height``) [m]; NaN
+            where the ground is the plane ``z = 0``.
 
     """
 
@@ -89,6 +92,7 @@ class Segmentation:
     raw_regions: int
     params: SegmentParams
     scale: RockScale
+    ground: F64
 
 
 def _renumber_by_size(labels: I32) -> I32:
@@ -108,6 +112,8 @@ def segment_mesh(
     spec: Mapping[str, Any] | None = None,
 ) -> Segmentation:
     """Segment a stockpile mesh (stockpile frame: z up, ground at ``z = 0``) into rocks.
+
+    Open ground off the plane is found too where ``max_rock_b`` is known (see :mod:`.ground`).
 
     Args:
         vertices: Nx3 vertex positions.
@@ -130,12 +136,11 @@ def segment_mesh(
     edge = scale.edge
     normals = smooth_normals(geom, adj, p.normal_smoothing)
     active = np.ones(m, dtype=bool)
+    tolerance = p.ground_tolerance_edges * edge
+    ground = ground_height(geom.centroids, p.ground_window_b * scale.max_rock_b, edge, tolerance)
     if p.exclude_ground:
-        tolerance = p.ground_tolerance_edges * edge
-        window = p.ground_window_b * scale.max_rock_b
-        on_ground = (geom.centroids[:, 2] < tolerance) | open_ground(
-            geom.centroids, window, edge, tolerance
-        )
+        level = np.nan_to_num(ground, nan=0.0)
+        on_ground = geom.centroids[:, 2] - level < tolerance
         active &= ~(on_ground & (normals[:, 2] >= p.ground_min_nz))
     # One smoothing serves both scales: depths[0] is the valley's, depths[-1] the split's. A
     # mesh without a length (every edge degenerate) has no scale to look for valleys at.
@@ -200,4 +205,4 @@ def segment_mesh(
     # Every valley face is handed back first, so that the regions border each other along the
     # valleys' middles where the clean-ups look; the far ones are then left out of every rock.
     labels = np.where(far, 0, labels).astype(np.int32)
-    return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale)
+    return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale, ground)

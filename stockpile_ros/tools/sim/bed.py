@@ -331,14 +331,15 @@ def bed_surface(
 def drape(surface: BedSurface, amplitude: float, length: float) -> BedSurface:
     """Lay the bed over uneven ground: raise every vertex by a wave of its plan position.
 
-    ``z += amplitude (1 + sin(2 pi x / length) cos(2 pi y / length))``: troughs stay at
-    ``z = 0``, crests rise ``2 amplitude``. A vertical shear rather than a bed dropped on the
+    ``z += amplitude sin(2 pi x / length) cos(2 pi y / length)``: ``z = 0`` is the site's mean
+    plane, as a plane fitted through its ground would be, with hollows ``amplitude`` under it and
+    crests as far over it. A vertical shear rather than a bed dropped on the
     wave: the rocks lean with the ground and stretch along it by ``sqrt(1 + slope^2)`` (about
     2 % at a slope of 0.2), which the truth does not follow.
 
     Args:
         surface: The bed's surface on flat ground.
-        amplitude: Half the ground's rise from trough to crest [m].
+        amplitude: Half the ground's rise from hollow to crest [m].
         length: Wavelength along x and along y [m].
 
     Raises:
@@ -349,5 +350,5 @@ def drape(surface: BedSurface, amplitude: float, length: float) -> BedSurface:
         raise StockpileError('a wave needs a positive length')
     v = surface.vertices.copy()
     k = 2.0 * np.pi / length
-    v[:, 2] += amplitude * (1.0 + np.sin(k * v[:, 0]) * np.cos(k * v[:, 1]))
+    v[:, 2] += amplitude * np.sin(k * v[:, 0]) * np.cos(k * v[:, 1])
     return replace(surface, vertices=v)
