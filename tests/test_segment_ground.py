@@ -80,7 +80,8 @@ def test_ground_off_the_plane_is_left_out_when_the_largest_rock_is_known() -> No
     # 2.8 cm), so without a largest rock it is searched.
     v, f = _boulders(0.06, 1.0)
     plane = analyse_mesh(v, f, mesh_info=INFO)
-    assert any('2.79 x 2.79 m' in w for w in plane.report.warnings)  # the ground, as a sheet
+    # The ground, as a sheet, and what would find it.
+    assert any('2.79 x 2.79 m' in w and 'segment.max_rock_b' in w for w in plane.report.warnings)
     assert plane.segmentation.scale.max_rock_b == 0.0
     known = analyse_mesh(v, f, seg_params=SegmentParams(max_rock_b=0.4), mesh_info=INFO)
     assert known.segmentation.scale.max_rock_b == 0.4

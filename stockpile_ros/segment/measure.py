@@ -348,17 +348,30 @@ def split_sheets(
     return [r for r in rocks if r.id not in ids], sheets
 
 
-def sheet_warnings(sheets: list[RockMeasure], params: MeasureParams, unit: str) -> list[str]:
-    """Warnings for report.json about the regions left out as sheets (lengths in ``unit``)."""
+def sheet_warnings(
+    sheets: list[RockMeasure], params: MeasureParams, unit: str, largest_known: bool
+) -> list[str]:
+    """Warnings for report.json about the regions left out as sheets (lengths in ``unit``).
+
+    ``largest_known``: whether open ground off the plane was looked for (``max_rock_b`` known
+    and ``ground_window_b`` positive).
+    """
     if not sheets:
         return []
     r = max(sheets, key=lambda r: r.b)
+    ground = (
+        'ground neither on the plane z = 0 nor found as open ground (no bare patch holds a '
+        'square segment.ground_window_b largest rocks wide), a wrong up (pass --up)'
+        if largest_known
+        else 'ground that is not on the plane z = 0 (uneven ground: give the largest rock, '
+        'segment.max_rock_b, or check a class, and open ground off the plane is found), a wrong '
+        'up (pass --up)'
+    )
     return [
         f'{len(sheets)} region{"s" if len(sheets) > 1 else ""} left out as sheets, not rocks '
         f'(thickness under {params.min_thickness:g} of their width; the largest {r.a:.3g} x '
-        f'{r.b:.3g} {unit} and {r.c:.3g} {unit} thick): ground that is not on the plane z = 0 '
-        '(uneven ground, or a wrong up: pass --up) or slivers of buried rocks. Rocks touching '
-        'them may be missing or cut.'
+        f'{r.b:.3g} {unit} and {r.c:.3g} {unit} thick): {ground} or slivers of buried rocks. '
+        'Rocks touching them may be missing or cut.'
     ]
 
 

@@ -279,7 +279,12 @@ def analyse_mesh(
         mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
         warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
-        + sheet_warnings(measured.sheets, mp, 'm' if metric else 'model units')
+        + sheet_warnings(
+            measured.sheets,
+            mp,
+            'm' if metric else 'model units',
+            seg.params.ground_window_b * seg.scale.max_rock_b > 0,
+        )
         + visibility_warnings(rocks),
     )
     return Analysis(v, f, colors, seg, rocks, report)
