@@ -118,7 +118,7 @@ def _parabolic(z: F64, half: int, drop: float, erode: bool, axis: int) -> F64:
     return out
 
 
-def _opening(z: F64, half: int, drop: float, outside: npt.NDArray[np.bool_]) -> F64:
+def _opening(z: F64, half: int, drop: float, outside: Mask) -> F64:
     """Open ``z`` with a dome ``2 half + 1`` cells wide that falls ``drop`` at its edges.
 
     Only placements resting at least ``RESTING`` on the survey bound the surface from below.
@@ -189,7 +189,7 @@ def ground_height(points: npt.ArrayLike, window: float, cell: float, tolerance: 
     return height
 
 
-def _within(low: F64, surface: F64, tolerance: float, outside: npt.NDArray[np.bool_]) -> Mask:
+def _within(low: F64, surface: F64, tolerance: float, outside: Mask) -> Mask:
     """Cells of the survey whose lowest point is within ``tolerance`` over ``surface``."""
     near = ~outside
     near[near] = low[near] - surface[near] <= tolerance

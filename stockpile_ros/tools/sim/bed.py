@@ -333,9 +333,9 @@ def drape(surface: BedSurface, amplitude: float, length: float) -> BedSurface:
 
     ``z += amplitude sin(2 pi x / length) cos(2 pi y / length)``: ``z = 0`` is the site's mean
     plane, as a plane fitted through its ground would be, with hollows ``amplitude`` under it and
-    crests as far over it. A vertical shear rather than a bed dropped on the
-    wave: the rocks lean with the ground and stretch along it by ``sqrt(1 + slope^2)`` (about
-    2 % at a slope of 0.2), which the truth does not follow.
+    crests as far over it. A vertical shear rather than a bed dropped on the wave: the rocks lean
+    with the ground and stretch along it by ``sqrt(1 + slope^2)`` (about 2 % at a slope of 0.2),
+    which the truth does not follow.
 
     Args:
         surface: The bed's surface on flat ground.
