@@ -69,3 +69,25 @@ def test_adjacency_of_two_triangles() -> None:
     assert isinstance(adj, FaceAdjacency)
     assert adj.i.tolist() == [0] and adj.j.tolist() == [1]
     assert adj.neighbour_count().tolist() == [1, 1, 0]
+
+
+def _adjacency_by_dict(f: np.ndarray) -> list[tuple[int, int]]:
+    """Face pairs in order of their edge (smaller vertex, larger vertex), chained along an edge."""
+    edges: dict[tuple[int, int], list[int]] = {}
+    for half, (a, b) in enumerate(zip(f.ravel(), f[:, [1, 2, 0]].ravel())):
+        edges.setdefault((min(a, b), max(a, b)), []).append(half // 3)
+    pairs = []
+    for key in sorted(edges):
+        chain = edges[key]
+        pairs += [(min(p, q), max(p, q)) for p, q in zip(chain, chain[1:]) if p != q]
+    return pairs
+
+
+@pytest.mark.parametrize('seed', range(20))
+def test_adjacency_equals_edge_dictionary(seed: int) -> None:
+    # Few vertices: non-manifold fans, degenerate faces and rows of one vertex ending with the
+    # column the next row starts with are all common.
+    rng = np.random.default_rng(seed)
+    f = rng.integers(0, 7, size=(int(rng.integers(1, 40)), 3))
+    adj = face_adjacency(f)
+    assert list(zip(adj.i.tolist(), adj.j.tolist())) == _adjacency_by_dict(f)

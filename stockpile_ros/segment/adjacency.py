@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy import sparse
 
 __all__ = ['FaceAdjacency', 'FaceGeometry', 'face_adjacency', 'face_geometry']
 
@@ -97,15 +98,24 @@ def face_adjacency(faces: npt.ArrayLike, n_vertices: int | None = None) -> FaceA
     nv = int(f.max()) + 1 if n_vertices is None else int(n_vertices)
     a = f.ravel()
     b = f[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * nv + np.maximum(a, b)
-    # Timsort (stable) finds the runs a mesh's face order leaves in the keys: about twice as fast
-    # as quicksort on a Poisson mesh, no slower on shuffled faces, and the chain along a
-    # non-manifold edge no longer depends on the sort's tie order.
-    order = np.argsort(key, kind='stable')
-    key = key[order]
-    face_of = order // 3
-    same = np.flatnonzero(key[1:] == key[:-1])
-    i, j = face_of[same], face_of[same + 1]
+    # Half-edges ordered by (smaller vertex, larger vertex, half-edge): grouped by the smaller
+    # vertex with a counting sort (a sparse matrix's rows), then each vertex's few by column, the
+    # half-edge's index in the column's low bits so that every column is distinct. The order is
+    # that of a stable sort of the edge keys, at two thirds of its cost on a Poisson mesh. The
+    # columns fit in 63 bits below about 10^8 faces.
+    bits = (3 * m - 1).bit_length()
+    column = (np.maximum(a, b) << bits) | np.arange(3 * m)
+    rows = sparse.csr_matrix(
+        (np.ones(3 * m, dtype=np.int8), (np.minimum(a, b), column)), shape=(nv, nv << bits)
+    )
+    half = rows.indices & ((1 << bits) - 1)
+    other = rows.indices >> bits
+    same = other[1:] == other[:-1]
+    # Runs of one column that meet across two rows are not the same edge.
+    starts = rows.indptr[1:-1]
+    same[starts[(starts > 0) & (starts < len(half))] - 1] = False
+    at = np.flatnonzero(same)
+    i, j = half[at] // 3, half[at + 1] // 3
     keep = i != j
-    lo, hi = np.minimum(i[keep], j[keep]), np.maximum(i[keep], j[keep])
-    return FaceAdjacency(m, lo, hi)
+    i, j = i[keep], j[keep]
+    return FaceAdjacency(m, np.minimum(i, j), np.maximum(i, j))

@@ -1,20 +1,18 @@
 """Region growing of the paper's search, vectorised and exact.
 
 The paper's search starts at a seed, adds every unvisited neighbour that passes Eq. 2 from the
-face it
-stands on, and restarts at the next unvisited face until the mesh is covered. The faces one run
-collects are the faces reachable from its seed in the directed graph of passing edges, restricted to
-faces no earlier run took. The union of earlier runs is closed under that reachability (a run stops
-only where no passing edge leads out), so the restriction changes nothing: a face belongs to the
-first seed, in seed order, that can reach it.
+face it stands on, and restarts at the next unvisited face until the mesh is covered. The faces
+one run collects are the faces reachable from its seed in the directed graph of passing edges,
+restricted to faces no earlier run took. The union of earlier runs is closed under that
+reachability (a run stops only where no passing edge leads out), so the restriction changes
+nothing: a face belongs to the first seed, in seed order, that can reach it.
 
 That is computed here with one compiled depth-first search: virtual nodes ``v_0 -> v_1 -> ...``
-chain
-the seeds, ``v_k`` points first to seed ``k`` and then to ``v_{k+1}``; a depth-first search from
-``v_0`` finishes everything seed ``k`` reaches before it moves on to ``v_{k+1}``, so the run of a
-face
-is the number of virtual nodes before it in the discovery order. The labels equal those of the
-per-face search in :mod:`stockpile_ros.tools.reference_bfs` exactly (tested), at compiled speed.
+chain the seeds, ``v_k`` points first to seed ``k`` and then to ``v_{k+1}``; a depth-first search
+from ``v_0`` finishes everything seed ``k`` reaches before it moves on to ``v_{k+1}``, so the run
+of a face is the number of virtual nodes before it in the discovery order. The labels equal those
+of the per-face search in :mod:`stockpile_ros.tools.reference_bfs` exactly (tested), at compiled
+speed.
 """
 
 from __future__ import annotations
@@ -51,18 +49,20 @@ def grow_regions(n_faces: int, src: I64, dst: I64, seeds: I64) -> npt.NDArray[np
     if n_seeds == 0:
         return labels
     n = n_faces + n_seeds
-    virtual = n_faces + np.arange(n_seeds, dtype=np.int64)
-    rows = np.concatenate([src, virtual, virtual[:-1]])
-    cols = np.concatenate([dst, seeds.astype(np.int64), virtual[1:]])
-    # Canonical CSR sorts each row by column: a virtual row lists its seed (a face, so a smaller
-    # index) before the next virtual node, which is what the chain needs.
-    graph = sp.coo_matrix(
-        (np.ones(len(cols), dtype=np.int8), (rows.astype(np.int32), cols.astype(np.int32))),
-        shape=(n, n),
-    ).tocsr()
-    graph.sort_indices()
+    # The faces' rows from the passing edges (float64 weights, the search's own type, so that
+    # scipy takes the graph without a copy); the virtual rows written after them as they are,
+    # each its seed and then the next virtual node, in the order the search must take them.
+    faces_out = sp.csr_matrix((np.ones(len(src)), (src, dst)), shape=(n_faces, n))
+    index = faces_out.indices.dtype
+    chain = np.empty(2 * n_seeds - 1, dtype=index)
+    chain[0::2] = seeds
+    chain[1::2] = n_faces + np.arange(1, n_seeds)
+    ends = faces_out.indptr[-1] + np.minimum(2 * np.arange(1, n_seeds + 1), 2 * n_seeds - 1)
+    indices = np.concatenate([faces_out.indices, chain])
+    indptr = np.concatenate([faces_out.indptr, ends.astype(index)])
+    graph = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     found = np.asarray(
-        depth_first_order(graph, int(virtual[0]), directed=True, return_predecessors=False),
+        depth_first_order(graph, n_faces, directed=True, return_predecessors=False),
         dtype=np.int64,
     )
     is_virtual = found >= n_faces
