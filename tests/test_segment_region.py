@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from segment_fixtures import small_pile
@@ -74,12 +76,12 @@ def test_adjacency_of_two_triangles() -> None:
 def _adjacency_by_dict(f: np.ndarray) -> list[tuple[int, int]]:
     """Face pairs in order of their edge (smaller vertex, larger vertex), chained along an edge."""
     edges: dict[tuple[int, int], list[int]] = {}
-    for half, (a, b) in enumerate(zip(f.ravel(), f[:, [1, 2, 0]].ravel())):
+    for half, (a, b) in enumerate(zip(f.ravel(), f[:, [1, 2, 0]].ravel(), strict=True)):
         edges.setdefault((min(a, b), max(a, b)), []).append(half // 3)
     pairs = []
     for key in sorted(edges):
         chain = edges[key]
-        pairs += [(min(p, q), max(p, q)) for p, q in zip(chain, chain[1:]) if p != q]
+        pairs += [(min(p, q), max(p, q)) for p, q in itertools.pairwise(chain) if p != q]
     return pairs
 
 
@@ -90,4 +92,4 @@ def test_adjacency_equals_edge_dictionary(seed: int) -> None:
     rng = np.random.default_rng(seed)
     f = rng.integers(0, 7, size=(int(rng.integers(1, 40)), 3))
     adj = face_adjacency(f)
-    assert list(zip(adj.i.tolist(), adj.j.tolist())) == _adjacency_by_dict(f)
+    assert list(zip(adj.i.tolist(), adj.j.tolist(), strict=True)) == _adjacency_by_dict(f)
