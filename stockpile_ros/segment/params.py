@@ -292,8 +292,15 @@ def median_edge(vertices: F64, faces: npt.NDArray[np.int64]) -> float:
     """
     # An even stride of faces gives the median of a million-face mesh to a fraction of a percent
     # at a small share of the cost; the same faces are picked whatever the mesh's size in metres.
-    tri = vertices[faces[:: max(1, -(-len(faces) // EDGE_SAMPLES))]]
-    length = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).ravel()
+    sample = faces[:: max(1, -(-len(faces) // EDGE_SAMPLES))]
+    a, b = sample.ravel(), sample[:, [1, 2, 0]].ravel()
+    # Summed a coordinate at a time, x then y then z as a norm sums them: half the cost of
+    # gathering whole rows, and the same lengths.
+    square = np.zeros(len(a))
+    for column in np.ascontiguousarray(vertices.T):
+        side = column[a] - column[b]
+        square += side * side
+    length = np.sqrt(square)
     length = length[length > 0]
     return float(np.median(length)) if len(length) else 0.0
 
