@@ -83,13 +83,15 @@ def _same_statuses(recorder: Recorder, replayed: list[Any], timeout_s: float = 1
     the result was in). So the statuses are compared in the order of their pipeline state (stable:
     one state's statuses in arrival order), once all have come or ``timeout_s`` has passed.
     """
-    expected = sorted(_statuses(replayed), key=lambda s: s[0])
+
+    def by_state(msgs: list[Any]) -> list[tuple[int, str, str, int]]:
+        return sorted(_statuses(msgs), key=lambda s: s[0])
+
+    expected = by_state(replayed)
     deadline = time.monotonic() + timeout_s
-    got = sorted(_statuses(recorder.on(topics.STATUS)), key=lambda s: s[0])
-    while got != expected and time.monotonic() < deadline:
+    while by_state(recorder.on(topics.STATUS)) != expected and time.monotonic() < deadline:
         time.sleep(0.05)
-        got = sorted(_statuses(recorder.on(topics.STATUS)), key=lambda s: s[0])
-    assert got == expected
+    assert by_state(recorder.on(topics.STATUS)) == expected
 
 
 def _rocks(msgs: list[Any]) -> list[tuple[float, ...]]:

@@ -108,6 +108,8 @@ def face_adjacency(faces: npt.ArrayLike, n_vertices: int | None = None) -> FaceA
     rows = sparse.csr_matrix(
         (np.ones(3 * m, dtype=np.int8), (np.minimum(a, b), column)), shape=(nv, nv << bits)
     )
+    # Already sorted by the conversion (it sums duplicates); said here, as the pairing needs it.
+    rows.sort_indices()
     half = rows.indices & ((1 << bits) - 1)
     other = rows.indices >> bits
     same = other[1:] == other[:-1]
