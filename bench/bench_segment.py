@@ -90,7 +90,7 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
         f'graph {t_default:.2f} s, ratio {t_mesh / t_default:.2f}x, labels identical: {same}'
     )
     radii = [scale.valley_radius, scale.split_radius]
-    t_valley = best_of(lambda: valley_depths(v, f, g, radii, scale.edge), repeat)
+    t_valley = best_of(lambda: valley_depths(v, f, g, radii, scale.edge, adj.vertex_edges), repeat)
     print(f'default mode, one core, best of {repeat}: total {t_default:.2f} s '
           f'(median edge {scale.edge * 1000:.2f} mm, smallest rock {scale.min_rock_b * 1000:.0f} '
           f'mm; '

@@ -8,7 +8,7 @@ import pytest
 from segment_fixtures import height_field
 
 from stockpile_ros.segment import valleys
-from stockpile_ros.segment.adjacency import face_geometry
+from stockpile_ros.segment.adjacency import face_adjacency, face_geometry
 from stockpile_ros.segment.params import median_edge
 from stockpile_ros.segment.valleys import valley_depths
 
@@ -29,9 +29,9 @@ def test_a_wide_radius_on_the_coarse_graph_finds_the_valleys_of_the_mesh(
     edge = median_edge(v, f)
     radius = 8 * edge
     assert radius / valleys.COARSE_CELLS >= valleys.COARSE_MIN_EDGES * edge
-    (coarse,) = valley_depths(v, f, geom, [radius], edge)
+    (coarse,) = valley_depths(v, f, geom, [radius], edge, face_adjacency(f).vertex_edges)
     monkeypatch.setattr(valleys, 'COARSE_MIN_EDGES', float('inf'))
-    (mesh,) = valley_depths(v, f, geom, [radius], edge)
+    (mesh,) = valley_depths(v, f, geom, [radius], edge, face_adjacency(f).vertex_edges)
     x, y, z = geom.centroids.T
     # On the rocks (the ground is left out of the search) and away from the mesh's border, where
     # the cubes of the coarse graph are cut.

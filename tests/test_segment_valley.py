@@ -10,7 +10,7 @@ import numpy.typing as npt
 import pytest
 from segment_fixtures import height_field
 
-from stockpile_ros.segment.adjacency import FaceAdjacency, face_geometry
+from stockpile_ros.segment.adjacency import FaceAdjacency, face_adjacency, face_geometry
 from stockpile_ros.segment.cleanup import hand_back
 from stockpile_ros.segment.params import SegmentParams, median_edge
 from stockpile_ros.segment.segmentation import segment_mesh
@@ -39,7 +39,10 @@ DOMES = SegmentParams(min_rock_b=0.1)
 
 def _valley_area_near(v: F64, f: npt.NDArray[np.int64], x0: float) -> tuple[float, float]:
     geom = face_geometry(v, f)
-    valley = valley_depths(v, f, geom, [0.0075], median_edge(v, f))[0] > 0.0005
+    valley = (
+        valley_depths(v, f, geom, [0.0075], median_edge(v, f), face_adjacency(f).vertex_edges)[0]
+        > 0.0005
+    )
     near = np.abs(geom.centroids[:, 0] - x0) < 0.01
     return float(geom.areas[valley & near].sum()), float(geom.areas[valley & ~near].sum())
 
@@ -89,9 +92,11 @@ def test_depths_at_several_scales_match_one_scale_at_a_time() -> None:
     v, f = height_field(_domes, 0.1, 81)
     geom = face_geometry(v, f)
     edge = median_edge(v, f)
-    both = valley_depths(v, f, geom, [0.015, 0.0075], edge)
+    both = valley_depths(v, f, geom, [0.015, 0.0075], edge, face_adjacency(f).vertex_edges)
     for radius, depth in zip([0.015, 0.0075], both, strict=True):
-        np.testing.assert_allclose(depth, valley_depths(v, f, geom, [radius], edge)[0])
+        np.testing.assert_allclose(
+            depth, valley_depths(v, f, geom, [radius], edge, face_adjacency(f).vertex_edges)[0]
+        )
 
 
 def test_a_tiny_or_degenerate_edge_cannot_make_the_smoothing_run_for_ever() -> None:
@@ -102,7 +107,9 @@ def test_a_tiny_or_degenerate_edge_cannot_make_the_smoothing_run_for_ever() -> N
     # A radius of a billion edge lengths (2e18 rounds uncapped) on a small mesh comes back, after
     # the capped number of rounds: deep in the valley, level far from it.
     v, f = height_field(lambda x, y: 0.3 * np.abs(x), 0.1, 21)
-    (depth,) = valley_depths(v, f, face_geometry(v, f), [1e9 * 0.01], 0.01)
+    (depth,) = valley_depths(
+        v, f, face_geometry(v, f), [1e9 * 0.01], 0.01, face_adjacency(f).vertex_edges
+    )
     assert np.all(np.isfinite(depth))
     centre = np.abs(face_geometry(v, f).centroids[:, 0]) < 0.01
     assert depth[centre].mean() > 0
@@ -147,7 +154,10 @@ def test_two_domes_in_one_region_are_split_at_the_crease_between_them() -> None:
     ground = params.ground_tolerance_edges * edge
     labels = np.where(geom.centroids[:, 2] > ground, 1, 0).astype(np.int32)
     radius = seg.scale.split_radius
-    deep = valley_depths(v, f, geom, [radius], edge)[0] > params.split_depth_ratio * radius
+    deep = (
+        valley_depths(v, f, geom, [radius], edge, face_adjacency(f).vertex_edges)[0]
+        > params.split_depth_ratio * radius
+    )
     split = split_at_valleys(labels, seg.adjacency, geom.areas, deep, params.split_min_share)
     xy = geom.centroids[:, :2]
     tops = [np.argmin(np.linalg.norm(xy - [x, 0.0], axis=1)) for x in (-0.045, 0.045)]

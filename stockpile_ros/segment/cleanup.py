@@ -31,7 +31,7 @@ I32 = npt.NDArray[np.int32]
 BORDER_SAMPLES = 256
 
 
-HULL_SAMPLES = 2000
+HULL_SAMPLES = 500
 
 
 def hand_back(
@@ -82,14 +82,20 @@ def merge_fragments(
     labels = labels.copy()
     if min_area <= 0:
         return labels
+    src, dst = adj.src, adj.dst
     while True:
         sizes = np.bincount(labels, weights=areas, minlength=int(labels.max()) + 1)
         small = (sizes < min_area) & (np.bincount(labels, minlength=len(sizes)) > 0)
         small[0] = False
         if not small.any():
             return labels
-        a, b = labels[adj.src], labels[adj.dst]
-        cross = (a != b) & small[a] & (b > 0)
+        a = labels[src]
+        # Regions only grow, so a later round's fragments are made of this round's: their edges
+        # are all among these.
+        near = small[a]
+        src, dst, a = src[near], dst[near], a[near]
+        b = labels[dst]
+        cross = (a != b) & (b > 0)
         if not merge or not cross.any():
             labels[small[labels]] = 0
             return labels

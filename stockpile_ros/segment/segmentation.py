@@ -105,6 +105,31 @@ def _renumber_by_size(labels: I32) -> I32:
     return remap[labels]
 
 
+def _most_convex_first(convexity: F64, faces: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Return ``faces`` by decreasing ``convexity``, equal values in face order.
+
+    The order of a stable sort, at half its cost on a million faces: each value becomes an
+    integer in the same order (the float's bits, negatives' magnitude bits flipped), its lowest
+    bits give way to the face index, and these unique keys are sorted by value alone. Values
+    that differ only in the bits given up (under 2^-32 of the value on a million faces) fall in
+    one run of equal keys; the few such runs are then put in order by value.
+    """
+    bits = max(1, int(faces.max(initial=0)).bit_length())
+    # +0.0 turns -0.0 into 0.0, which a stable sort of the floats takes as equal.
+    value = -convexity[faces] + 0.0
+    key = value.view(np.int64)
+    key = np.where(key < 0, key ^ np.int64(0x7FFF_FFFF_FFFF_FFFF), key)
+    key = np.sort(((key >> bits) << bits) | faces)
+    order = key & ((1 << bits) - 1)
+    value = -convexity[order] + 0.0
+    run = np.cumsum(np.concatenate([[True], key[1:] >> bits != key[:-1] >> bits]))
+    mixed = run[1:][(run[1:] == run[:-1]) & (value[1:] != value[:-1])]
+    if len(mixed):
+        at = np.flatnonzero(np.isin(run, mixed))
+        order[at] = order[at[np.lexsort((order[at], value[at], run[at]))]]
+    return order
+
+
 def segment_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -147,7 +172,7 @@ def segment_mesh(
     valley_radius, split_radius = scale.valley_radius, scale.split_radius
     scales = ((valley_radius, p.valley_depth_ratio), (split_radius, p.split_depth_ratio))
     radii = [r for r, d in scales if d > 0 and edge > 0]
-    depths = valley_depths(v, f, geom, radii, edge) if radii else []
+    depths = valley_depths(v, f, geom, radii, edge, adj.vertex_edges) if radii else []
     valley = np.zeros(m, dtype=bool)
     if p.valley_depth_ratio > 0 and depths:
         valley = (depths[0] > p.valley_depth_ratio * valley_radius) & active
@@ -173,8 +198,7 @@ def segment_mesh(
         )
         count = search.neighbour_count()
         convexity = np.where(count > 0, total / np.maximum(count, 1), -np.inf)
-        seeds = np.flatnonzero(active)
-        seeds = seeds[np.argsort(-convexity[seeds], kind='stable')]
+        seeds = _most_convex_first(convexity, np.flatnonzero(active))
     src = np.concatenate([search.i[pass_ij], search.j[pass_ji]])
     dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
     labels = grow_regions(m, src, dst, seeds)

@@ -85,7 +85,7 @@ def _neighbour_mean(i: npt.NDArray[np.int64], j: npt.NDArray[np.int64], n: int) 
 
     """
     # Duplicates are summed: the matrix only marks neighbours. Built one way and added to its
-    # transpose: a mesh's half-edges then go in once each instead of twice, at a third of the cost.
+    # transpose: a mesh's edges go in once each, not once per direction.
     link = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
     link = (link + link.T).tocsr()
     # Each row divided by its count of neighbours, in place (a product with a diagonal matrix
@@ -153,6 +153,7 @@ def valley_depths(
     geom: FaceGeometry,
     radii: Sequence[float],
     edge: float,
+    edges: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
 ) -> list[F64]:
     """Depth of each face under its smoothed surroundings, at each scale in ``radii``.
 
@@ -172,6 +173,7 @@ def valley_depths(
         geom: Face normals and areas (the vertex normals are their area-weighted means).
         radii: Scales of the neighbourhood [m].
         edge: Median edge length of the mesh [m] (see ``median_edge``).
+        edges: The mesh's edges between vertices, each once (``FaceAdjacency.vertex_edges``).
 
     Returns:
         Per face depths [m], one array per radius, in the order of ``radii``.
@@ -199,10 +201,10 @@ def valley_depths(
     for k in sorted(range(len(radii)), key=lambda k: radii[k]):
         cell = radii[k] / COARSE_CELLS
         if edge > 0 and cell >= COARSE_MIN_EDGES * edge:
-            at = _coarse_smooth(vertices, a, b, radii[k], cell, spread)
+            at = _coarse_smooth(vertices, *edges, radii[k], cell, spread)
         else:
             if step is None:
-                step = _neighbour_mean(a, b, n)
+                step = _neighbour_mean(*edges, n)
             for _ in range(smoothing_passes(radii[k], edge) - done):
                 smooth = step @ smooth
                 done += 1
