@@ -93,3 +93,13 @@ def test_adjacency_equals_edge_dictionary(seed: int) -> None:
     f = rng.integers(0, 7, size=(int(rng.integers(1, 40)), 3))
     adj = face_adjacency(f)
     assert list(zip(adj.i.tolist(), adj.j.tolist(), strict=True)) == _adjacency_by_dict(f)
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_vertex_edges_are_the_unique_edges(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    f = rng.integers(0, 9, size=(int(rng.integers(1, 40)), 3))
+    a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
+    want = sorted({(min(x, y), max(x, y)) for x, y in zip(a.tolist(), b.tolist(), strict=True)})
+    u, w = face_adjacency(f).vertex_edges
+    assert list(zip(u.tolist(), w.tolist(), strict=True)) == want

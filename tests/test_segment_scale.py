@@ -232,3 +232,17 @@ def test_ground_off_the_plane_is_left_out_as_a_sheet_with_a_warning() -> None:
     assert any('2 regions left out as sheets' in w for w in analysis.report.warnings)
     sheets = set(np.unique(kept.segmentation.labels)) - set(np.unique(analysis.segmentation.labels))
     assert len(sheets) == 2  # their faces are no rock's in the segmented mesh either
+
+
+def test_most_convex_first_is_a_stable_sort() -> None:
+    from stockpile_ros.segment.segmentation import _most_convex_first
+
+    rng = np.random.default_rng(3)
+    for trial in range(60):
+        n = int(rng.integers(1, 3000))
+        c = 1 + rng.integers(0, 3, size=n) * 1e-13 if trial % 2 else rng.normal(size=n).round(2)
+        c[rng.random(n) < 0.05] = -np.inf
+        c[rng.random(n) < 0.05] = -0.0
+        faces = np.flatnonzero(rng.random(n) < 0.7)
+        want = faces[np.argsort(-c[faces], kind='stable')]
+        assert np.array_equal(_most_convex_first(c, faces), want)

