@@ -246,3 +246,26 @@ def test_most_convex_first_is_a_stable_sort() -> None:
         faces = np.flatnonzero(rng.random(n) < 0.7)
         want = faces[np.argsort(-c[faces], kind='stable')]
         assert np.array_equal(_most_convex_first(c, faces), want)
+
+
+def test_a_fragment_joins_a_region_only_along_a_share_of_its_outline() -> None:
+    # Faces 0-2 a fragment (area 0.3) touching region 2 (faces 3-6) along one edge; in the whole
+    # mesh every face has three neighbours, so the fragment's outline is 9 - 4 = 5 edges.
+    adj = FaceAdjacency(7, np.arange(6), np.arange(1, 7))
+    labels = np.array([1] * 3 + [2] * 4, dtype=np.int32)
+    areas = np.array([0.1] * 3 + [1.0] * 4)
+    degree = np.full(7, 3)
+    assert merge_fragments(labels, adj, areas, 1.0, True, 0.2, degree).tolist() == [2] * 7
+    dropped = [0] * 3 + [2] * 4
+    assert merge_fragments(labels, adj, areas, 1.0, True, 0.25, degree).tolist() == dropped
+    # Within the adjacency alone the outline is that one edge: it joins.
+    assert merge_fragments(labels, adj, areas, 1.0, True, 0.25).tolist() == [2] * 7
+
+
+def test_two_fragments_join_whatever_their_border() -> None:
+    # Two fragments of 0.6 each touching along one edge of their outlines of 4: together a region.
+    adj = FaceAdjacency(4, np.arange(3), np.arange(1, 4))
+    labels = np.array([1, 1, 2, 2], dtype=np.int32)
+    areas = np.full(4, 0.3)
+    merged = merge_fragments(labels, adj, areas, 1.0, True, 0.5, np.full(4, 3))
+    assert merged.tolist() == [2] * 4

@@ -60,13 +60,24 @@ def hand_back(
 
 
 def merge_fragments(
-    labels: I32, adj: FaceAdjacency, areas: F64, min_area: float, merge: bool
+    labels: I32,
+    adj: FaceAdjacency,
+    areas: F64,
+    min_area: float,
+    merge: bool,
+    min_border: float = 0.0,
+    degree: npt.NDArray[np.int64] | None = None,
 ) -> I32:
     """Merge regions of less area than ``min_area`` into the neighbour they share most edges with.
 
     A fragment only moves into a neighbour that ranks higher by (area, id), so merges never cycle
     and the lowest-ranked fragment always moves: each round makes progress. Fragments with no
-    labelled neighbour (all fragments when ``merge`` is off) get label 0.
+    labelled neighbour (all fragments when ``merge`` is off) get label 0, and so does a fragment
+    whose best neighbour is a region (not a fragment) that it touches along less than
+    ``min_border`` of its outline: a small rock wedged between larger ones reaches them through
+    gaps in the valleys round it, and joined to one it would make a wrong rock of two. Two
+    fragments join whatever their border (two pieces of one small rock may touch at a corner),
+    and the union is judged again.
 
     Args:
         labels: Per-face region ids (0 = excluded).
@@ -74,6 +85,9 @@ def merge_fragments(
         areas: Face areas.
         min_area: Regions under this area are fragments.
         merge: Whether fragments are merged (else they get label 0).
+        min_border: Least share of a fragment's outline it must share with a region to join it.
+        degree: Per face, its edge neighbours in the whole mesh (those left out of ``adj``, such
+            as valley faces, count towards the outline); None: its neighbours in ``adj``.
 
     Returns:
         The labels, fragments merged or cleared.
@@ -83,6 +97,8 @@ def merge_fragments(
     if min_area <= 0:
         return labels
     src, dst = adj.src, adj.dst
+    if degree is None:
+        degree = adj.neighbour_count()
     while True:
         sizes = np.bincount(labels, weights=areas, minlength=int(labels.max()) + 1)
         small = (sizes < min_area) & (np.bincount(labels, minlength=len(sizes)) > 0)
@@ -101,12 +117,22 @@ def merge_fragments(
             return labels
         pair, count = np.unique(np.stack([a[cross], b[cross]], axis=1), axis=0, return_counts=True)
         order = np.lexsort((-count, pair[:, 0]))
-        pair = pair[order]
+        pair, count = pair[order], count[order]
         best = np.ones(len(pair), dtype=bool)
         best[1:] = pair[1:, 0] != pair[:-1, 0]
-        frag, into = pair[best, 0], pair[best, 1]
+        frag, into, border = pair[best, 0], pair[best, 1], count[best]
         up = (sizes[into] > sizes[frag]) | ((sizes[into] == sizes[frag]) & (into > frag))
         target = np.arange(len(sizes))
+        if min_border > 0:
+            # The outline: edges to every face outside, those along the mesh's border aside.
+            outline = np.bincount(labels, weights=degree, minlength=len(sizes))
+            outline -= np.bincount(a[a == b], minlength=len(sizes))
+            weak = ~small[into] & (border < min_border * outline[frag])
+            # A fragment moving into one that leaves waits a round to find its new neighbour.
+            gone = np.zeros(len(sizes), dtype=bool)
+            gone[frag[weak]] = True
+            up &= ~gone[into]
+            into = np.where(weak, 0, into)
         target[frag[up]] = into[up]
         while True:
             nxt = target[target]

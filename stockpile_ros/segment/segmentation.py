@@ -205,7 +205,15 @@ def segment_mesh(
     raw = int(labels.max()) if m else 0
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
     if min_area > 0:
-        labels = merge_fragments(labels, search, geom.areas, min_area, p.merge_fragments)
+        labels = merge_fragments(
+            labels,
+            search,
+            geom.areas,
+            min_area,
+            p.merge_fragments,
+            p.fragment_min_border,
+            adj.neighbour_count(),
+        )
     far = np.zeros(m, dtype=bool)
     if valley.any():
         if p.valley_reach > 0:
