@@ -49,7 +49,7 @@ RESOLVABLE_EDGES = 4.0
 
 #: Median edge lengths across the smallest rock of interest from which the segmentation finds
 #: rocks as it should: on bench/bench_yardstick.py's 300-rock beds (aggregate, cobble, riprap)
-#: recall rose from 0.78-0.89 at 20 to 0.87-0.93 at 30, precision from 0.85-0.88 to 0.88-0.92.
+#: recall rose from 0.81-0.90 at 20 to 0.89-0.93 at 30, precision from 0.88-0.89 to 0.92-0.95.
 SHARP_EDGES = 30.0
 
 
@@ -131,9 +131,9 @@ class SegmentParams:
             make a wrong rock of two [a share of the fragment's own outline; 0: any border]
             [off]. Two fragments join whatever their border. On bench/bench_yardstick.py's
             300-rock beds at 20 edges across the smallest b, 0 -> 0.1 took recall/precision from
-            0.783/0.839 to 0.808/0.882 (aggregate), 0.842/0.856 to 0.850/0.864 (cobble) and
-            0.891/0.883 to 0.899/0.892 (riprap), rocks of two or more true rocks from 21, 25 and
-            15 to 16, 17 and 7: most small rocks merged into a neighbour had reached it along 1-5
+            0.783/0.839 to 0.808/0.882 (aggregate), 0.842/0.856 to 0.858/0.880 (cobble) and
+            0.891/0.883 to 0.899/0.892 (riprap), regions holding two true rocks from 21, 25 and 15
+            to 15, 11 and 6: most small rocks merged into a neighbour had reached it along 1-5
             edges, under 0.07 of their outline. On aggregate 0.08-0.2 gave the same recall; on
             the demo's reconstruction the pieces of single rocks share 0.09 of their outline and
             more, 0.08-0.12 left its 14 rocks as they were (0.929/0.929) and 0.2 lost one.

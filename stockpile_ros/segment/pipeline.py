@@ -121,7 +121,7 @@ def _resolution_warnings(seg: Segmentation) -> list[str]:
     return [
         f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, '
         f'{across:.0f} median edge lengths of the mesh: on simulated beds of 300 rocks, '
-        f'recall was 0.78-0.89 at 20 edge lengths and 0.87-0.93 at {SHARP_EDGES:g}, the lost '
+        f'recall was 0.81-0.90 at 20 edge lengths and 0.89-0.93 at {SHARP_EDGES:g}, the lost '
         'rocks joined to a neighbour. For a check, capture the pile closer or reconstruct it '
         f'finer, to edges of {scale.requested / SHARP_EDGES:.3g} m or less.'
     ]
