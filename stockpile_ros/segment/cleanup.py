@@ -97,7 +97,7 @@ def merge_fragments(
     if min_area <= 0:
         return labels
     src, dst = adj.src, adj.dst
-    if degree is None:
+    if min_border > 0 and degree is None:
         degree = adj.neighbour_count()
     while True:
         sizes = np.bincount(labels, weights=areas, minlength=int(labels.max()) + 1)
@@ -123,7 +123,7 @@ def merge_fragments(
         frag, into, border = pair[best, 0], pair[best, 1], count[best]
         up = (sizes[into] > sizes[frag]) | ((sizes[into] == sizes[frag]) & (into > frag))
         target = np.arange(len(sizes))
-        if min_border > 0:
+        if degree is not None and min_border > 0:
             # The outline: edges to every face outside, those along the mesh's border aside.
             outline = np.bincount(labels, weights=degree, minlength=len(sizes))
             outline -= np.bincount(a[a == b], minlength=len(sizes))
