@@ -1,7 +1,8 @@
 """A point cloud made into the metric z-up stockpile mesh and its ``mesh.json``.
 
 The route: units to metres, isolated points dropped, levelled (:mod:`.level`), normals taken as
-given or estimated from the nearest points and turned towards the sensor or up, then the screened
+given or estimated from the nearest points and turned towards the sensor or, without one, to
+where the cloud is seen from (:mod:`.orient`), then the screened
 Poisson surface of :func:`~stockpile_ros.recon.surface.poisson_surface` (density trimming,
 vertices far from every point dropped, cropped to the points' box) at a depth whose finest cell
 is about the point spacing. Every length here is in point spacings, so a 1 cm survey of a gravel
@@ -25,6 +26,7 @@ from ..ranges import Range
 from ..recon.surface import PoissonOptions, poisson_surface
 from ..segment.params import RESOLVABLE_EDGES, SegmentParams
 from .level import level_transform, parse_up, trend_up
+from .orient import orient_outward
 from .read import Cloud
 
 __all__ = ['CloudOptions', 'cloud_segment_params', 'mesh_cloud', 'point_spacing', 'poisson_depth']
@@ -134,16 +136,19 @@ def poisson_depth(extent: float, spacing: float, cell_spacings: float, max_depth
     return int(min(max_depth, max(1, math.ceil(math.log2(max(cells, 2.0))))))
 
 
-def _orient(normals: F64, points: F64, viewpoints: F64 | None) -> F64:
-    """Turn each normal towards its sensor, or up without one."""
-    towards = (viewpoints - points) if viewpoints is not None else np.array([0.0, 0.0, 1.0])
-    away = np.einsum('ij,ij->i', normals, np.broadcast_to(towards, normals.shape)) < 0
-    out: F64 = np.where(away[:, None], -normals, normals)
-    return out
+def _orient(normals: F64, points: F64, viewpoints: F64 | None, spacing: float) -> tuple[F64, str]:
+    """Turn each normal towards its sensor, or to the side the cloud is seen from without one."""
+    if viewpoints is not None:
+        away = np.einsum('ij,ij->i', normals, viewpoints - points) < 0
+        return np.where(away[:, None], -normals, normals), 'towards its sensor'
+    unit = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    turned, seen = orient_outward(points, unit, spacing)
+    how = f'towards where it is seen from ({100 * seen:.0f} % seen, the rest as their neighbours)'
+    return turned, how
 
 
 def _normals(
-    local: F64, given: F64 | None, viewpoints: F64 | None, neighbours: int
+    local: F64, given: F64 | None, viewpoints: F64 | None, neighbours: int, spacing: float
 ) -> tuple[F64, str]:
     """Return normals in the stockpile frame (``given``, already rotated, or estimated)."""
     if given is not None:
@@ -152,15 +157,15 @@ def _normals(
             return given, 'given'
         if up <= 1 - _ORIENTED_SHARE:
             return -given, 'given, every one turned over (they faced down)'
-        return _orient(given, local, viewpoints), 'given without a consistent side: each turned up'
+        turned, how = _orient(given, local, viewpoints, spacing)
+        return turned, f'given without a consistent side: each turned {how}'
     import open3d
 
     o3d: Any = open3d
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local))
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=neighbours))
-    towards = 'its sensor' if viewpoints is not None else 'up'
-    how = f'estimated ({neighbours} points), towards {towards}'
-    return _orient(np.asarray(pcd.normals, dtype=np.float64), local, viewpoints), how
+    turned, how = _orient(np.asarray(pcd.normals, dtype=np.float64), local, viewpoints, spacing)
+    return turned, f'estimated ({neighbours} points), {how}'
 
 
 def mesh_cloud(
@@ -217,8 +222,8 @@ def mesh_cloud(
     local = sim.apply(points)
     rotated = None if given is None else given @ sim.rotation.T
     local_views = None if views is None else sim.apply(views)
-    normals, normal_method = _normals(local, rotated, local_views, options.neighbours)
     spacing_m = spacing * metres_per_unit
+    normals, normal_method = _normals(local, rotated, local_views, options.neighbours, spacing_m)
     extent = float(np.max(local.max(axis=0) - local.min(axis=0)))
     depth = options.depth or poisson_depth(extent, spacing_m, options.cell_spacings,
                                            options.max_depth)  # fmt: skip
