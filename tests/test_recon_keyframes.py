@@ -12,7 +12,13 @@ from recon_synth import look_at, render, scene_mesh, seen_points, viewing_angle
 
 from stockpile_ros.artefacts import WorkFolder
 from stockpile_ros.camera import CameraModel, Frame
-from stockpile_ros.recon.keyframes import KeyframeSelector, KeyframeStore, SelectorOptions
+from stockpile_ros.recon.keyframes import (
+    KeyframeSelector,
+    KeyframeStore,
+    SelectorOptions,
+    _in_front,
+    view_angle_change,
+)
 from stockpile_ros.recon.options import ReconOptions
 from stockpile_ros.recon.stages import run_keyframes
 
@@ -228,3 +234,28 @@ def test_image_only_view_angle_is_close_to_the_true_one() -> None:
             # orbits of bench/bench_view_angle.py the estimate is 0.80-0.89 of the truth at the
             # median, 0.71-0.78 at the tenth percentile; lines 0.95-1.01).
             assert decision.view_angle == pytest.approx(truth, rel=0.4, abs=0.5), (camera, k)
+
+
+def test_a_one_frame_step_is_not_read_as_the_twisted_pair() -> None:
+    # A cart's step of one frame: 2 cm sideways at 3-5 m, half a degree of turn. The Sampson
+    # error cannot tell the true motion from its twisted pair (turned half a turn about the
+    # baseline) or from the reversed baseline; only points in front of both views can.
+    rng = np.random.default_rng(0)
+    scene = rng.uniform([-1.0, -1.0, 3.0], [1.0, 1.0, 5.0], (200, 3))
+    c, s = np.cos(np.radians(0.5)), np.sin(np.radians(0.5))
+    turn = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    move = np.array([0.02, 0.0, 0.001])
+    second = scene @ turn.T + move
+    p1, p2 = scene / scene[:, 2:], second / second[:, 2:]
+    unit = move / np.linalg.norm(move)
+    twisted = (2.0 * np.outer(unit, unit) - np.eye(3)) @ turn
+    for r, t in ((turn, move), (twisted, move), (turn, -move), (twisted, -move)):
+        got_turn, got_move = _in_front(p1, p2, r, t)
+        np.testing.assert_allclose(got_turn, turn, atol=1e-12)
+        np.testing.assert_allclose(got_move, unit, atol=1e-12)
+    rays1 = p1 / np.linalg.norm(p1, axis=1, keepdims=True)
+    rays2 = p2 / np.linalg.norm(p2, axis=1, keepdims=True)
+    angle, source = view_angle_change(rays1, rays2, threshold=1e-3)
+    true = np.median(np.degrees(np.arccos(np.sum(
+        rays1 @ turn.T * rays2, axis=1))))  # fmt: skip
+    assert source == 'image' and angle == pytest.approx(true, abs=0.2), (angle, true)
