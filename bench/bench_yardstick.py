@@ -11,6 +11,9 @@ where the bed's open ground reads as the demo pile's reconstructed ground does t
 (``valley_depths``; share of flat faces deeper than ``valley_depth_ratio`` radii at 1, 1.5, 3
 and 4 edge lengths: demo 0.15, 0.17, 0.13, 0.13; bed without relief 0.03, 0.02, 0.04, 0.05; 0.15
 cells 0.06 at each; 0.3 cells 0.12, 0.13, 0.14, 0.12; measured on the cobble bed at 20 edges).
+Poisson's normals are the true ones unless ``--normal-neighbours`` N asks for
+them estimated, as a survey or dense matching has them: a plane fit to the N nearest noisy
+points, turned towards the ray that found each point.
 With ``--wave`` the bed lies on uneven ground (``drape``: a wave of that amplitude and
 ``--wave-length``, both in units of the largest b; 0: flat). Then the product's
 ``segment_and_measure`` with the smallest and largest rocks set to the material's smallest and
@@ -29,7 +32,8 @@ material.
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--noise 0.2] [--relief 0.3]
-        [--relief-length 3] [--wave 0] [--wave-length 10] [--set FIELD=VALUE ...]
+        [--relief-length 3] [--normal-neighbours 0] [--wave 0] [--wave-length 10]
+        [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -84,6 +88,9 @@ def main() -> None:
     parser.add_argument('--noise', type=float, default=0.2, help='point noise [Poisson cells]')
     parser.add_argument('--relief', type=float, default=0.3, help='smooth relief [cells]')
     parser.add_argument('--relief-length', type=float, default=3.0, help='its length [cells]')
+    parser.add_argument(
+        '--normal-neighbours', type=int, default=0, help='normals estimated [points; 0: true]'
+    )
     parser.add_argument('--wave', type=float, default=0.0, help='ground wave [largest b]')
     parser.add_argument('--wave-length', type=float, default=10.0, help='its length [largest b]')
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
@@ -91,9 +98,10 @@ def main() -> None:
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     overrides = {k: ast.literal_eval(v) for k, v in (s.split('=', 1) for s in args.set)}
+    normals = f'from {args.normal_neighbours} points' if args.normal_neighbours else 'true'
     print(f'{args.rocks} rocks per bed, seed {args.seed}, noise {args.noise} cells, relief '
-          f'{args.relief} cells over {args.relief_length}; ground wave {args.wave} largest b over '
-          f'{args.wave_length}; '
+          f'{args.relief} cells over {args.relief_length}; normals {normals}; ground wave '
+          f'{args.wave} largest b over {args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
           'merges splits  |b err| b bias  D50 err  D50 vis  seconds')  # fmt: skip
@@ -109,6 +117,7 @@ def main() -> None:
                 args.noise,
                 relief_cells=args.relief,
                 relief_length_cells=args.relief_length,
+                normal_neighbours=args.normal_neighbours,
             )
             if args.wave:
                 surface = drape(surface, args.wave * hi, args.wave_length * hi)

@@ -12,7 +12,14 @@ from stockpile_ros.segment.measure import measure_rocks
 from stockpile_ros.segment.params import SegmentParams
 from stockpile_ros.segment.segmentation import segment_mesh
 from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
-from stockpile_ros.tools.sim.bed import BedConfig, BedSurface, bed_surface, build_bed, drape
+from stockpile_ros.tools.sim.bed import (
+    BedConfig,
+    BedSurface,
+    _estimated_normals,
+    bed_surface,
+    build_bed,
+    drape,
+)
 from stockpile_ros.tools.sim.pile import Gradation, PlacedRock
 
 SMALLEST = 0.1
@@ -149,3 +156,19 @@ def test_relief_roughens_the_ground_as_dense_matching_does() -> None:
     # Measured when written: 0.04 and 0.22 cells.
     assert plain.std() < 0.08 * cell
     assert 0.15 * cell < heights.std() < 0.35 * cell
+
+
+def test_estimated_normals_follow_the_surface_and_face_the_survey() -> None:
+    rng = np.random.default_rng(4)
+    # A dome seen from above by rays falling straight down and 29 degrees off it.
+    xy = rng.uniform(-0.5, 0.5, size=(4000, 2))
+    points = np.column_stack([xy, np.sqrt(1.0 - np.sum(xy**2, axis=1))])
+    tilt = np.deg2rad(29.0)
+    rays = np.where(
+        (np.arange(len(points)) % 2 == 0)[:, None],
+        [0.0, 0.0, -1.0],
+        [np.sin(tilt), 0.0, -np.cos(tilt)],
+    )
+    n = _estimated_normals(points, rays, 20)
+    assert np.all(np.einsum('ij,ij->i', n, rays) < 0)
+    assert np.median(np.einsum('ij,ij->i', n, points)) > np.cos(np.deg2rad(3.0))

@@ -227,6 +227,15 @@ def _relief_field(points: F64, length: float, rng: np.random.Generator) -> tuple
     return at(points), gradient
 
 
+def _estimated_normals(points: F64, rays: F64, neighbours: int) -> F64:
+    """Plane-fit normals of ``points`` over ``neighbours`` nearest, each facing against its ray."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=neighbours))
+    n = np.asarray(cloud.normals, dtype=np.float64)
+    facing_away = np.einsum('ij,ij->i', n, rays) > 0
+    return np.where(facing_away[:, None], -n, n)
+
+
 def bed_surface(
     rocks: list[PlacedRock],
     cell: float,
@@ -235,6 +244,7 @@ def bed_surface(
     trim_quantile: float = 0.02,
     relief_cells: float = 0.0,
     relief_length_cells: float = 3.0,
+    normal_neighbours: int = 0,
 ) -> BedSurface:
     """Survey ``rocks`` (and the ground round them) from above and mesh what was seen by Poisson.
 
@@ -257,6 +267,10 @@ def bed_surface(
             correlated over a few cells [in ``cell``; 0: none]. White noise alone is averaged
             away by Poisson and leaves a cleaner surface than a reconstructed pile's.
         relief_length_cells: Correlation length of that displacement [in ``cell``].
+        normal_neighbours: Poisson's normals are the true ones (0) or, as a survey or dense
+            matching has to, estimated by a plane fit to this many nearest of the noisy points
+            and turned towards the ray that found each point [points]. Estimated normals round
+            the edges between rocks, so the valleys Poisson meshes are shallower.
 
     Raises:
         StockpileError: The cell is not positive or there is no rock.
@@ -294,14 +308,17 @@ def bed_surface(
     seen = np.zeros(int(first[-1]), dtype=bool)
     # What was seen is surveyed at a spacing of the smallest rock, however coarse the cell.
     fine = smallest / VISIBILITY_RAYS_PER_B
-    points, normals, labels = [], [], []
+    points, normals, labels, rays = [], [], [], []
     for _, gid, prim, _ in _survey(scene, lo, hi, z_top, fine, rng):
         on_rock = gid < len(rocks)
         seen[first[gid[on_rock]] + prim[on_rock]] = True
-    for hit, gid, _, nrm in _survey(scene, lo, hi, z_top, cell / RAYS_PER_CELL, rng):
+    for d, (hit, gid, _, nrm) in zip(
+        _directions(), _survey(scene, lo, hi, z_top, cell / RAYS_PER_CELL, rng), strict=True
+    ):
         points.append(hit)
         normals.append(nrm)
         labels.append(to_label[gid])
+        rays.append(np.tile(d, (len(hit), 1)))
     p, n = np.concatenate(points), np.concatenate(normals)
     point_labels = np.concatenate(labels)
     if relief_cells > 0:
@@ -314,6 +331,8 @@ def bed_surface(
         n /= np.linalg.norm(n, axis=1, keepdims=True)
     if noise_cells > 0:
         p = p + n * rng.normal(0.0, noise_cells * cell, size=(len(p), 1))
+    if normal_neighbours > 0:
+        n = _estimated_normals(p, np.concatenate(rays), normal_neighbours)
     extent = float(np.max(p.max(axis=0) - p.min(axis=0)))
     # The solver's cube is ``scale`` times the points' bounding cube, cut 2^depth times.
     depth = max(1, int(np.ceil(np.log2(1.1 * extent / cell))))
