@@ -32,13 +32,16 @@ and against the visible ones). One row per material and resolution;
 ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU time of
 ``segment_and_measure`` on one thread (which cores shared with other work do not inflate), and
 its growth with the face count (a least-squares power law over the resolutions) ends each
-material.
+material. With ``--steps`` each row is followed by what each step of ``segment_mesh`` left of
+the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
+at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
+gains and which loses rocks.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
-        [--set FIELD=VALUE ...]
+        [--steps] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -61,7 +64,13 @@ from stockpile_ros.cloud.mesh import CloudOptions  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams  # noqa: E402
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure  # noqa: E402
-from stockpile_ros.tools.evaluation.labels import SizedRock, score_labels  # noqa: E402
+from stockpile_ros.segment.segmentation import segment_mesh  # noqa: E402
+from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
+    OUTCOMES,
+    SizedRock,
+    label_outcomes,
+    score_labels,
+)
 from stockpile_ros.tools.sim.bed import (  # noqa: E402
     MATERIALS,
     BedConfig,
@@ -85,6 +94,21 @@ def bed(material: str, rocks: int, seed: int, cache: Path):
     return placed
 
 
+def print_steps(surface, params: SegmentParams, truth: dict[int, SizedRock]) -> None:
+    """Print, after each step of the segmentation, what became of the visible rocks."""
+    visible = [k for k, r in truth.items() if r.visible_fraction >= 0.3]
+    steps: list[tuple[str, np.ndarray]] = []
+    seg = segment_mesh(
+        surface.vertices,
+        surface.faces,
+        params,
+        on_step=lambda name, labels: steps.append((name, labels.copy())),
+    )
+    for name, labels in steps:
+        outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
+        print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rocks', type=int, default=300)
@@ -102,6 +126,9 @@ def main() -> None:
     )
     parser.add_argument('--wave', type=float, default=0.0, help='ground wave [largest b]')
     parser.add_argument('--wave-length', type=float, default=10.0, help='its length [largest b]')
+    parser.add_argument(
+        '--steps', action='store_true', help='after each row, what each step left of its rocks'
+    )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
     args = parser.parse_args()
@@ -156,6 +183,8 @@ def main() -> None:
                   f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}',
                   flush=True)  # fmt: skip
             cost.append((len(surface.faces), seconds))
+            if args.steps:
+                print_steps(surface, params, truth)
         if len(cost) >= 2:
             faces, secs = np.log(np.array(cost)).T
             growth = np.polyfit(faces, secs, 1)[0]

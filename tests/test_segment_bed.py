@@ -10,8 +10,13 @@ import pytest
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.segment.measure import measure_rocks
 from stockpile_ros.segment.params import SegmentParams
-from stockpile_ros.segment.segmentation import segment_mesh
-from stockpile_ros.tools.evaluation.labels import LabelScore, SizedRock, score_labels
+from stockpile_ros.segment.segmentation import STEPS, segment_mesh
+from stockpile_ros.tools.evaluation.labels import (
+    LabelScore,
+    SizedRock,
+    label_outcomes,
+    score_labels,
+)
 from stockpile_ros.tools.sim.bed import (
     BedConfig,
     BedSurface,
@@ -93,6 +98,37 @@ def test_perfect_labels_score_perfectly_and_a_merge_does_not() -> None:
     assert score.recall == 0.5
     assert score.precision == 1.0
     assert score.b_error == 0.0
+
+
+def test_label_outcomes_say_what_became_of_each_rock() -> None:
+    # Rock 1 whole; rock 2 in a region mostly rock 3's; rock 4 in three pieces; rock 5 half in
+    # a region with a little ground, half unlabelled; rock 6 untouched; rock 9 not there.
+    true_labels = np.array([1, 1, 2, 2, 3, 3, 3, 4, 4, 4] + [5] * 10 + [0, 0, 6])
+    labels = np.array([1, 1, 2, 2, 2, 2, 2, 3, 4, 5] + [6] * 5 + [0] * 5 + [6, 6, 0])
+    counts = label_outcomes(true_labels, labels, np.ones(23), [1, 2, 4, 5, 6, 9])
+    assert counts == {'matched': 1, 'with another rock': 1, 'in pieces': 3, 'short': 1}
+    assert label_outcomes(true_labels, true_labels, np.ones(23), [1, 2, 3, 4, 5, 6])['matched'] == 6
+
+
+def test_each_step_of_the_segmentation_is_reported_with_its_labels() -> None:
+    surface = _surface(8.0)
+    seen: list[tuple[str, np.ndarray]] = []
+    params = SegmentParams(min_rock_b=SMALLEST, min_rock_edges=4.0)
+    seg = segment_mesh(
+        surface.vertices,
+        surface.faces,
+        params,
+        on_step=lambda name, labels: seen.append((name, labels.copy())),
+    )
+    names = [name for name, _ in seen]
+    assert names == [s for s in STEPS if s in names]
+    assert names[:2] == ['search', 'fragments'] and 'convex join' in names
+    # The last step's labels are the result's, numbered differently.
+    last = seen[-1][1]
+    pairs = np.unique(np.stack([last, seg.labels]), axis=1)
+    assert len(np.unique(pairs[0])) == len(np.unique(pairs[1])) == pairs.shape[1]
+    # The search alone leaves the bed in more regions than the clean-ups do.
+    assert len(np.unique(seen[0][1])) > len(np.unique(seg.labels))
 
 
 def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:

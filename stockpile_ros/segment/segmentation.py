@@ -43,7 +43,7 @@ class, say) keeps the larger scales; :attr:`RockScale.requested` records what wa
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,7 +58,19 @@ from .params import RINGS_PER_EDGE, RockScale, SegmentParams, median_edge, rock_
 from .region import grow_regions
 from .valleys import smooth_normals, split_at_valleys, valley_depths
 
-__all__ = ['Segmentation', 'segment_mesh']
+__all__ = ['STEPS', 'Segmentation', 'segment_mesh']
+
+#: The steps of :func:`segment_mesh` in the order they run, as ``on_step`` names them.
+STEPS = (
+    'search',
+    'fragments',
+    'valleys near',
+    'valleys all',
+    'undersides',
+    'convex join',
+    'valley split',
+    'far valleys out',
+)
 
 I32 = npt.NDArray[np.int32]
 F64 = npt.NDArray[np.float64]
@@ -130,11 +142,16 @@ def _most_convex_first(convexity: F64, faces: npt.NDArray[np.int64]) -> npt.NDAr
     return order
 
 
+def _no_step(name: str, labels: I32) -> None:
+    """Take no note of a step."""
+
+
 def segment_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
     params: SegmentParams | None = None,
     spec: Mapping[str, Any] | None = None,
+    on_step: Callable[[str, I32], None] | None = None,
 ) -> Segmentation:
     """Segment a stockpile mesh (stockpile frame: z up, ground at ``z = 0``) into rocks.
 
@@ -146,6 +163,9 @@ def segment_mesh(
         params: Parameters; the ``default`` preset if None.
         spec: The class the gradation will be checked against, or None: when ``min_rock_b`` is
             0 it sets the smallest rock of interest (see ``rock_scale``).
+        on_step: Called after each step that runs with its name (``STEPS``) and the per-face
+            labels it left (not renumbered; read them, do not keep them), so that a bench can
+            tell which step gains or loses a rock.
 
     Returns:
         The per-face labels and what they were computed from.
@@ -202,6 +222,8 @@ def segment_mesh(
     src = np.concatenate([search.i[pass_ij], search.j[pass_ji]])
     dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
     labels = grow_regions(m, src, dst, seeds)
+    step = on_step or _no_step
+    step('search', labels)
     raw = int(labels.max()) if m else 0
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
     if min_area > 0:
@@ -214,6 +236,7 @@ def segment_mesh(
             p.fragment_min_border,
             adj.neighbour_count(),
         )
+        step('fragments', labels)
     far = np.zeros(m, dtype=bool)
     if valley.any():
         if p.valley_reach > 0:
@@ -221,20 +244,27 @@ def segment_mesh(
             rings = math.ceil(RINGS_PER_EDGE * p.valley_reach * valley_radius / edge)
             labels = hand_back(labels, adj, valley, rings)
             far = valley & (labels == 0)
+            step('valleys near', labels)
         labels = hand_back(labels, adj, valley)
+        step('valleys all', labels)
         search = adj
     if p.drop_facing_down:
         # After the valley faces are handed back: a region that reaches a rock across a valley
         # borders it and stays.
         labels = drop_facing_down(labels, adj, geom.areas * geom.normals[:, 2])
+        step('undersides', labels)
     if p.merge_convex:
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
         )
+        step('convex join', labels)
     if p.split_depth_ratio > 0 and depths:
         deep = depths[-1] > p.split_depth_ratio * split_radius
         labels = split_at_valleys(labels, adj, geom.areas, deep, p.split_min_share)
+        step('valley split', labels)
     # Every valley face is handed back first, so that the regions border each other along the
     # valleys' middles where the clean-ups look; the far ones are then left out of every rock.
     labels = np.where(far, 0, labels).astype(np.int32)
+    if far.any():
+        step('far valleys out', labels)
     return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale, ground)

@@ -13,7 +13,7 @@ true rocks is given beside it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +22,10 @@ import numpy.typing as npt
 from ...segment.gradation import gradation
 from .match import LabelTransfer, MatchOptions, match_rocks
 
-__all__ = ['LabelScore', 'SizedRock', 'score_labels']
+__all__ = ['OUTCOMES', 'LabelScore', 'SizedRock', 'label_outcomes', 'score_labels']
+
+#: What became of a true rock in a labelling, as :func:`label_outcomes` counts it.
+OUTCOMES = ('matched', 'with another rock', 'in pieces', 'short')
 
 
 @dataclass(frozen=True)
@@ -134,3 +137,57 @@ def score_labels(
         d50_true_visible=d50_visible,
         d50_error_visible=d50 / d50_visible - 1.0,
     )
+
+
+def label_outcomes(
+    true_labels: npt.ArrayLike,
+    labels: npt.ArrayLike,
+    areas: npt.ArrayLike,
+    rocks: Collection[int],
+    min_iou: float = 0.5,
+    foreign_share: float = 0.3,
+) -> dict[str, int]:
+    """Count what became of each of ``rocks`` in a labelling, by its best region alone.
+
+    Meant for the labels between the steps of a segmentation, where no region is a reported
+    rock yet: each rock is looked at through the region (label > 0) holding most of its
+    surface, not matched one to one. ``matched``: that region's surface IoU with the rock is at
+    least ``min_iou``; else ``with another rock``: more than ``foreign_share`` of the region is
+    other surface (another rock's or ground); else ``in pieces``: the region holds under half the
+    rock; else ``short``: the rest of the rock is unlabelled. A rock no region touches counts as
+    ``in pieces``.
+
+    Args:
+        true_labels: Per face, the true rock id (0: ground).
+        labels: Per face, the region id (0: none).
+        areas: Per face, its area.
+        rocks: The true rock ids to look at (the visible ones, say).
+        min_iou: Least surface IoU of a match.
+        foreign_share: Share of a region's area on other surface that makes it a region of two.
+
+    Returns:
+        The count of each of ``OUTCOMES``.
+
+    """
+    t = np.asarray(true_labels, dtype=np.int64)
+    r = np.asarray(labels, dtype=np.int64)
+    a = np.asarray(areas, dtype=np.float64)
+    shared = np.zeros((int(t.max(initial=0)) + 1, int(r.max(initial=0)) + 1))
+    np.add.at(shared, (t, r), a)
+    rock_area, region_area = shared.sum(axis=1), shared.sum(axis=0)
+    counts = dict.fromkeys(OUTCOMES, 0)
+    for k in rocks:
+        if k >= len(shared) or not shared[k, 1:].any():
+            counts['in pieces'] += 1
+            continue
+        j = 1 + int(np.argmax(shared[k, 1:]))
+        both = shared[k, j]
+        if both >= min_iou * (rock_area[k] + region_area[j] - both):
+            counts['matched'] += 1
+        elif region_area[j] - both > foreign_share * region_area[j]:
+            counts['with another rock'] += 1
+        elif both < 0.5 * rock_area[k]:
+            counts['in pieces'] += 1
+        else:
+            counts['short'] += 1
+    return counts
