@@ -35,7 +35,8 @@ its growth with the face count (a least-squares power law over the resolutions) 
 material. With ``--steps`` each row is followed by what each step of ``segment_mesh`` left of
 the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
 at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
-gains and which loses rocks.
+gains and which loses rocks. The beds and their meshed surfaces are kept under ``--cache`` (a
+30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each surface once.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
@@ -54,6 +55,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 import argparse  # noqa: E402
 import ast  # noqa: E402
 import contextlib  # noqa: E402
+import hashlib  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -71,9 +73,12 @@ from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     label_outcomes,
     score_labels,
 )
+from stockpile_ros.tools.sim import bed as sim_bed  # noqa: E402
+from stockpile_ros.tools.sim import pile as sim_pile  # noqa: E402
 from stockpile_ros.tools.sim.bed import (  # noqa: E402
     MATERIALS,
     BedConfig,
+    BedSurface,
     bed_surface,
     build_bed,
     drape,
@@ -107,6 +112,37 @@ def print_steps(surface, params: SegmentParams, truth: dict[int, SizedRock]) -> 
     for name, labels in steps:
         outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
         print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
+
+
+def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> BedSurface:
+    """The bed surveyed and meshed at ``across`` edges, from the cache when made alike before.
+
+    A 30-edge surface takes minutes to mesh and segments in seconds, so sweeps of segmentation
+    parameters reuse it; the key holds every survey setting and the simulator's own source, so
+    a changed simulator meshes again.
+    """
+    lo, hi = MATERIALS[material]
+    source = b''.join(Path(m.__file__).read_bytes() for m in (sim_bed, sim_pile))
+    survey = ('rocks', 'seed', 'noise', 'relief', 'relief_length', 'normal_neighbours', 'wave')
+    settings = (material, across, args.wave_length, *(getattr(args, k) for k in survey))
+    key = hashlib.sha1(repr(settings).encode() + source).hexdigest()[:16]
+    path = args.cache / f'surface-{material}-{across:g}-{key}.pickle'
+    if path.exists():
+        with contextlib.suppress(ModuleNotFoundError, AttributeError):
+            return pickle.loads(path.read_bytes())
+    surface = bed_surface(
+        placed,
+        lo / across,
+        np.random.default_rng(args.seed),
+        args.noise,
+        relief_cells=args.relief,
+        relief_length_cells=args.relief_length,
+        normal_neighbours=args.normal_neighbours,
+    )
+    if args.wave:
+        surface = drape(surface, args.wave * hi, args.wave_length * hi)
+    path.write_bytes(pickle.dumps(surface))
+    return surface
 
 
 def main() -> None:
@@ -146,17 +182,7 @@ def main() -> None:
         lo, hi = MATERIALS[material]
         cost = []
         for across in args.edges:
-            surface = bed_surface(
-                placed,
-                lo / across,
-                np.random.default_rng(args.seed),
-                args.noise,
-                relief_cells=args.relief,
-                relief_length_cells=args.relief_length,
-                normal_neighbours=args.normal_neighbours,
-            )
-            if args.wave:
-                surface = drape(surface, args.wave * hi, args.wave_length * hi)
+            surface = surveyed(placed, material, across, args)
             params = SegmentParams.preset(
                 'default', **{'min_rock_b': lo, 'max_rock_b': hi, **overrides}
             )
