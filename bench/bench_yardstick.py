@@ -35,7 +35,8 @@ its growth with the face count (a least-squares power law over the resolutions) 
 material. With ``--steps`` each row is followed by what each step of ``segment_mesh`` left of
 the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
 at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
-gains and which loses rocks. The beds and their meshed surfaces are kept under ``--cache`` (a
+gains and which loses rocks (from the row's own run, whose seconds then include copying the
+labels). The beds and their meshed surfaces are kept under ``--cache`` (a
 30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each surface once.
 
 Usage:
@@ -58,7 +59,9 @@ import contextlib  # noqa: E402
 import hashlib  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -66,13 +69,13 @@ from stockpile_ros.cloud.mesh import CloudOptions  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams  # noqa: E402
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure  # noqa: E402
-from stockpile_ros.segment.segmentation import segment_mesh  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     OUTCOMES,
     SizedRock,
     label_outcomes,
     score_labels,
 )
+from stockpile_ros.tools.evaluation.match import MatchOptions  # noqa: E402
 from stockpile_ros.tools.sim import bed as sim_bed  # noqa: E402
 from stockpile_ros.tools.sim import pile as sim_pile  # noqa: E402
 from stockpile_ros.tools.sim.bed import (  # noqa: E402
@@ -86,32 +89,24 @@ from stockpile_ros.tools.sim.bed import (  # noqa: E402
 from stockpile_ros.tools.sim.pile import Gradation  # noqa: E402
 
 
-def bed(material: str, rocks: int, seed: int, cache: Path):
-    lo, hi = MATERIALS[material]
-    path = cache / f'{material}-{rocks}-{seed}.pickle'
+def cached(path: Path, make: Callable[[], Any]) -> Any:
+    """``make()``, kept pickled at ``path`` and read from there when it is there."""
     if path.exists():
         # A cache pickled by an older layout of the package is built again.
         with contextlib.suppress(ModuleNotFoundError, AttributeError):
             return pickle.loads(path.read_bytes())
+    made = make()
+    path.write_bytes(pickle.dumps(made))
+    return made
+
+
+def bed(material: str, rocks: int, seed: int, cache: Path):
+    lo, hi = MATERIALS[material]
     cfg = BedConfig(rocks=rocks, gradation=Gradation((lo, hi), (0.0, 100.0)))
-    placed = build_bed(np.random.default_rng(seed), cfg)
-    path.write_bytes(pickle.dumps(placed))
-    return placed
-
-
-def print_steps(surface, params: SegmentParams, truth: dict[int, SizedRock]) -> None:
-    """Print, after each step of the segmentation, what became of the visible rocks."""
-    visible = [k for k, r in truth.items() if r.visible_fraction >= 0.3]
-    steps: list[tuple[str, np.ndarray]] = []
-    seg = segment_mesh(
-        surface.vertices,
-        surface.faces,
-        params,
-        on_step=lambda name, labels: steps.append((name, labels.copy())),
+    return cached(
+        cache / f'{material}-{rocks}-{seed}.pickle',
+        lambda: build_bed(np.random.default_rng(seed), cfg),
     )
-    for name, labels in steps:
-        outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
-        print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
 
 
 def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> BedSurface:
@@ -126,23 +121,20 @@ def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> 
     survey = ('rocks', 'seed', 'noise', 'relief', 'relief_length', 'normal_neighbours', 'wave')
     settings = (material, across, args.wave_length, *(getattr(args, k) for k in survey))
     key = hashlib.sha1(repr(settings).encode() + source).hexdigest()[:16]
-    path = args.cache / f'surface-{material}-{across:g}-{key}.pickle'
-    if path.exists():
-        with contextlib.suppress(ModuleNotFoundError, AttributeError):
-            return pickle.loads(path.read_bytes())
-    surface = bed_surface(
-        placed,
-        lo / across,
-        np.random.default_rng(args.seed),
-        args.noise,
-        relief_cells=args.relief,
-        relief_length_cells=args.relief_length,
-        normal_neighbours=args.normal_neighbours,
-    )
-    if args.wave:
-        surface = drape(surface, args.wave * hi, args.wave_length * hi)
-    path.write_bytes(pickle.dumps(surface))
-    return surface
+
+    def make() -> BedSurface:
+        surface = bed_surface(
+            placed,
+            lo / across,
+            np.random.default_rng(args.seed),
+            args.noise,
+            relief_cells=args.relief,
+            relief_length_cells=args.relief_length,
+            normal_neighbours=args.normal_neighbours,
+        )
+        return drape(surface, args.wave * hi, args.wave_length * hi) if args.wave else surface
+
+    return cached(args.cache / f'surface-{material}-{across:g}-{key}.pickle', make)
 
 
 def main() -> None:
@@ -186,8 +178,18 @@ def main() -> None:
             params = SegmentParams.preset(
                 'default', **{'min_rock_b': lo, 'max_rock_b': hi, **overrides}
             )
+            steps: list[tuple[str, np.ndarray]] = []
             t0 = time.process_time()
-            measured = segment_and_measure(surface.vertices, surface.faces, params, MeasureParams())
+            measured = segment_and_measure(
+                surface.vertices,
+                surface.faces,
+                params,
+                MeasureParams(),
+                # Copies: a step's labels are read while it runs, not kept.
+                on_step=(lambda name, labels, kept=steps: kept.append((name, labels.copy())))
+                if args.steps
+                else None,
+            )
             seg, rocks = measured.segmentation, measured.rocks
             seconds = time.process_time() - t0
             truth = {
@@ -209,8 +211,11 @@ def main() -> None:
                   f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}',
                   flush=True)  # fmt: skip
             cost.append((len(surface.faces), seconds))
-            if args.steps:
-                print_steps(surface, params, truth)
+            seen = MatchOptions().visible_threshold
+            visible = [k for k, r in truth.items() if r.visible_fraction >= seen]
+            for name, labels in steps:
+                outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
+                print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
         if len(cost) >= 2:
             faces, secs = np.log(np.array(cost)).T
             growth = np.polyfit(faces, secs, 1)[0]

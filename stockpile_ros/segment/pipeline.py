@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -203,9 +204,13 @@ def segment_and_measure(
     seg_params: SegmentParams,
     measure_params: MeasureParams,
     spec: dict[str, Any] | None = None,
+    on_step: Callable[[str, npt.NDArray[np.int32]], None] | None = None,
 ) -> Measured:
-    """Segment a mesh (stockpile frame) and measure its rocks, sheets left out."""
-    seg = segment_mesh(vertices, faces, seg_params, spec)
+    """Segment a mesh (stockpile frame) and measure its rocks, sheets left out.
+
+    ``on_step`` is :func:`segment_mesh`'s.
+    """
+    seg = segment_mesh(vertices, faces, seg_params, spec, on_step)
     rocks, sheets = split_sheets(measure_rocks(vertices, seg, measure_params), measure_params)
     if sheets:
         # Not rocks: their faces go with the ground, in the segmented mesh too.
