@@ -70,6 +70,31 @@ def test_hand_back_splits_a_band_where_the_fronts_meet() -> None:
     assert hand_back(labels, adj, free).tolist() == [1] * 5 + [2] * 5
     # Fronts that stop after two rings leave the middle of the band to no region.
     assert hand_back(labels, adj, free, rings=2).tolist() == [1] * 3 + [0] * 4 + [2] * 3
+    # Fronts that may only cross edges running right: region 2 takes nothing.
+    rightwards = adj.dst > adj.src
+    assert hand_back(labels, adj, free, along=rightwards).tolist() == [1] * 9 + [2]
+
+
+def test_the_top_of_a_rock_sunk_between_two_others_is_not_handed_to_them() -> None:
+    # Two 5 cm domes 1 cm apart at their feet, and a 12 mm dome sunk in the gap: its exposed
+    # top, about 12 mm across, lies in their valley and is within a valley radius of both.
+    def dome(x: F64, y: F64, cx: float, radius: float) -> F64:
+        return np.sqrt(np.maximum(radius**2 - (x - cx) ** 2 - y**2, 0.0))
+
+    def big(x: F64, y: F64) -> F64:
+        return np.maximum(dome(x, y, -0.055, 0.05), dome(x, y, 0.055, 0.05))
+
+    v, f = height_field(lambda x, y: np.maximum(big(x, y), dome(x, y, 0.0, 0.012)), 0.1, 161)
+    seg = segment_mesh(v, f, DOMES)
+    c, areas = seg.geometry.centroids, seg.geometry.areas
+    top = dome(c[:, 0], c[:, 1], 0.0, 0.012) > big(c[:, 0], c[:, 1]) + 1e-4
+    domes = [
+        seg.labels[np.argmin(np.linalg.norm(c[:, :2] - [x, 0.0], axis=1))] for x in (-0.055, 0.055)
+    ]
+    assert len(set(domes)) == 2 and min(domes) > 0
+    # The fronts go down the domes' flanks into the valley and stop at its floor, where the
+    # sunk rock rises again (handed back by distance alone, 75 % of its top went to the domes).
+    assert areas[top & np.isin(seg.labels, domes)].sum() < 0.25 * areas[top].sum()
 
 
 def test_the_search_stops_at_a_rounded_crease() -> None:
@@ -81,9 +106,11 @@ def test_the_search_stops_at_a_rounded_crease() -> None:
     assert seg.labels[tops[0]] != seg.labels[tops[1]]
     assert min(seg.labels[tops]) > 0
     # Valley faces went back to the domes (the crease is within a valley radius of both): all
-    # that is left unlabelled is ground.
+    # that is left unlabelled is ground, but for a few faces on the crease's floor where its
+    # depth dips along it (no front going down reaches them).
     ground = SegmentParams().ground_tolerance_edges * seg.scale.edge
-    assert np.all(seg.geometry.centroids[seg.labels == 0, 2] < ground)
+    above = (seg.labels == 0) & (seg.geometry.centroids[:, 2] >= ground)
+    assert seg.geometry.areas[above].sum() < 0.001 * seg.geometry.areas[seg.labels > 0].sum()
     # Without the valley test the face-to-face criterion alone breaks the same mesh into pieces.
     assert segment_mesh(v, f, replace(DOMES, valley_depth_ratio=0.0)).raw_regions > 2
 

@@ -35,17 +35,24 @@ HULL_SAMPLES = 500
 
 
 def hand_back(
-    labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_], rings: int | None = None
+    labels: I32,
+    adj: FaceAdjacency,
+    free: npt.NDArray[np.bool_],
+    rings: int | None = None,
+    along: npt.NDArray[np.bool_] | None = None,
 ) -> I32:
     """Give unlabelled ``free`` faces the label of a labelled neighbour, front by front.
 
     Every round each free face next to a labelled face takes its label, so a band between two
     regions is split where the fronts from both sides meet. With ``rings``, the fronts stop after
-    that many rounds and the free faces they did not reach stay unlabelled.
+    that many rounds and the free faces they did not reach stay unlabelled; with ``along``, they
+    only cross the directed edges ``adj.src -> adj.dst`` it marks.
     """
     labels = labels.copy()
     src, dst = adj.src, adj.dst
     open_edge = free[dst] & (labels[dst] == 0)
+    if along is not None:
+        open_edge &= along
     src, dst = src[open_edge], dst[open_edge]
     done = 0
     while rings is None or done < rings:

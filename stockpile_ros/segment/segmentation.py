@@ -15,14 +15,15 @@ Two presets of :class:`SegmentParams`:
   creases, and a looser test merges touching rocks); seeds from the most convex faces; every
   region smaller than a share of the smallest rock of interest is a fragment and is merged into
   the neighbouring region it shares the longest border with; the valley faces are handed back to
-  the regions they border, growing from both sides of a valley until they meet (those farther
-  than about a valley radius from every region stay out of every rock, see ``valley_reach``); a
-  region that faces down and borders only ground is dropped (an underside cut off from its
-  rock); then neighbouring regions whose union stays convex across their shared border are
-  joined (on reconstructed piles, noise stops the search inside single rocks: this took precision
-  from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see ``merge_convex_borders``); last, a
-  region that a wider valley cuts into two or more large parts is split into them (two touching
-  rocks that the search joined through a gap in the narrower valley, see ``split_at_valleys``).
+  the regions they border, growing from both sides of a valley until they meet (those that no
+  region reaches going down into the valley within about a valley radius stay out of every
+  rock, see ``valley_reach``); a region that faces down and borders only ground is dropped (an
+  underside cut off from its rock); then neighbouring regions whose union stays convex across
+  their shared border are joined (on reconstructed piles, noise stops the search inside single
+  rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
+  ``merge_convex_borders``); last, a region that a wider valley cuts into two or more large parts
+  is split into them (two touching rocks that the search joined through a gap in the narrower
+  valley, see ``split_at_valleys``).
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
@@ -240,11 +241,15 @@ def segment_mesh(
     far = np.zeros(m, dtype=bool)
     if valley.any():
         if p.valley_reach > 0:
-            # The fronts go on from where they stopped: the same labels as in one go.
+            # Downhill only: a rock's flank goes down to the valley's floor, and what rises beyond
+            # it (the top of a rock sunk between others) is no flank of this region's rock.
             rings = math.ceil(RINGS_PER_EDGE * p.valley_reach * valley_radius / edge)
-            labels = hand_back(labels, adj, valley, rings)
+            down = depths[0][adj.dst] >= depths[0][adj.src]
+            labels = hand_back(labels, adj, valley, rings, down)
             far = valley & (labels == 0)
             step('valleys near', labels)
+        # Every valley face, for the clean-ups to see regions that meet along the valleys'
+        # middles; the far ones are left out again at the end.
         labels = hand_back(labels, adj, valley)
         step('valleys all', labels)
         search = adj
