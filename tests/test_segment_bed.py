@@ -7,6 +7,7 @@ import functools
 import numpy as np
 import pytest
 
+from stockpile_ros.cloud.mesh import estimate_normals
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.segment.measure import measure_rocks
 from stockpile_ros.segment.params import SegmentParams
@@ -20,7 +21,6 @@ from stockpile_ros.tools.evaluation.labels import (
 from stockpile_ros.tools.sim.bed import (
     BedConfig,
     BedSurface,
-    _estimated_normals,
     bed_surface,
     build_bed,
     drape,
@@ -205,6 +205,7 @@ def test_estimated_normals_follow_the_surface_and_face_the_survey() -> None:
         [0.0, 0.0, -1.0],
         [np.sin(tilt), 0.0, -np.cos(tilt)],
     )
-    n = _estimated_normals(points, rays, 20)
+    # As bed_surface asks for them: each sensor a step back along its ray.
+    n, _ = estimate_normals(points, points - rays, 20, 0.01)
     assert np.all(np.einsum('ij,ij->i', n, rays) < 0)
     assert np.median(np.einsum('ij,ij->i', n, points)) > np.cos(np.deg2rad(3.0))

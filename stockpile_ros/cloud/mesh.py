@@ -29,7 +29,14 @@ from .level import level_transform, parse_up, trend_up
 from .orient import orient_outward
 from .read import Cloud
 
-__all__ = ['CloudOptions', 'cloud_segment_params', 'mesh_cloud', 'point_spacing', 'poisson_depth']
+__all__ = [
+    'CloudOptions',
+    'cloud_segment_params',
+    'estimate_normals',
+    'mesh_cloud',
+    'point_spacing',
+    'poisson_depth',
+]
 
 F64 = npt.NDArray[np.float64]
 
@@ -159,12 +166,31 @@ def _normals(
             return -given, 'given, every one turned over (they faced down)'
         turned, how = _orient(given, local, viewpoints, spacing)
         return turned, f'given without a consistent side: each turned {how}'
+    return estimate_normals(local, viewpoints, neighbours, spacing)
+
+
+def estimate_normals(
+    points: F64, viewpoints: F64 | None, neighbours: int, spacing: float
+) -> tuple[F64, str]:
+    """Plane-fit normals of ``points`` over their ``neighbours`` nearest, turned to be seen.
+
+    Args:
+        points: Nx3 points.
+        viewpoints: Per point, where its sensor saw it from (each normal is turned towards it),
+            or None: towards where the cloud is seen from (``orient_outward``).
+        neighbours: Points in each plane fit.
+        spacing: The points' spacing [m], for ``orient_outward``.
+
+    Returns:
+        Unit normals and how they were found, in words.
+
+    """
     import open3d
 
     o3d: Any = open3d
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=neighbours))
-    turned, how = _orient(np.asarray(pcd.normals, dtype=np.float64), local, viewpoints, spacing)
+    turned, how = _orient(np.asarray(pcd.normals, dtype=np.float64), points, viewpoints, spacing)
     return turned, f'estimated ({neighbours} points), {how}'
 
 

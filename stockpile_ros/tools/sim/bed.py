@@ -35,6 +35,7 @@ import open3d as o3d
 from scipy.ndimage import gaussian_filter, map_coordinates
 from scipy.spatial import cKDTree
 
+from ...cloud.mesh import estimate_normals
 from ...errors import StockpileError
 from ..synthetic import poisson_mesh
 from .pile import (
@@ -227,15 +228,6 @@ def _relief_field(points: F64, length: float, rng: np.random.Generator) -> tuple
     return at(points), gradient
 
 
-def _estimated_normals(points: F64, rays: F64, neighbours: int) -> F64:
-    """Plane-fit normals of ``points`` over ``neighbours`` nearest, each facing against its ray."""
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=neighbours))
-    n = np.asarray(cloud.normals, dtype=np.float64)
-    facing_away = np.einsum('ij,ij->i', n, rays) > 0
-    return np.where(facing_away[:, None], -n, n)
-
-
 def bed_surface(
     rocks: list[PlacedRock],
     cell: float,
@@ -333,7 +325,8 @@ def bed_surface(
     if noise_cells > 0:
         p = p + n * rng.normal(0.0, noise_cells * cell, size=(len(p), 1))
     if normal_neighbours > 0:
-        n = _estimated_normals(p, np.concatenate(rays), normal_neighbours)
+        # The cloud route's own estimate, each sensor a step back along its ray.
+        n, _ = estimate_normals(p, p - np.concatenate(rays), normal_neighbours, cell)
     extent = float(np.max(p.max(axis=0) - p.min(axis=0)))
     # The solver's cube is ``scale`` times the points' bounding cube, cut 2^depth times.
     depth = max(1, int(np.ceil(np.log2(1.1 * extent / cell))))
