@@ -122,7 +122,7 @@ def test_each_step_of_the_segmentation_is_reported_with_its_labels() -> None:
     )
     names = [name for name, _ in seen]
     assert names == [s for s in STEPS if s in names]
-    assert names[:2] == ['search', 'fragments'] and 'convex join' in names
+    assert names[:3] == ['search', 'fragments', 'necks'] and 'convex join' in names
     # The last step's labels are the result's, numbered differently.
     last = seen[-1][1]
     pairs = np.unique(np.stack([last, seg.labels]), axis=1)

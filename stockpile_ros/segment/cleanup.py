@@ -10,6 +10,8 @@ import contextlib
 
 import numpy as np
 import numpy.typing as npt
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from .adjacency import FaceAdjacency, FaceGeometry
@@ -21,6 +23,7 @@ __all__ = [
     'hand_back',
     'merge_convex_borders',
     'merge_fragments',
+    'split_at_necks',
 ]
 
 
@@ -150,6 +153,76 @@ def merge_fragments(
         isolated[pair[:, 0]] = False
         target[isolated] = 0
         labels = target[labels].astype(np.int32)
+
+
+def split_at_necks(labels: I32, adj: FaceAdjacency, areas: F64, rings: int, min_core: float) -> I32:
+    """Split each region that a neck joins: parts wider than ``2 rings`` linked by a narrow pass.
+
+    Each region is eroded by ``rings`` rings of faces from its outline (its edges to every other
+    label, 0 included, and the mesh's border); where what is left (its cores) falls into two or
+    more parts of at least ``min_core`` area each, those parts become regions of their own and
+    the rest of the region goes, front by front within it, to the core that reaches it first.
+    Smaller cores are no part of their own: the fronts take them.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency of the whole mesh (faces left out of the search count as outline).
+        areas: Face areas.
+        rings: Depth of the erosion, in rings of faces.
+        min_core: Least area of a core that makes a part.
+
+    Returns:
+        The labels, each split region's parts numbered after every existing id.
+
+    """
+    m = len(labels)
+    i, j = adj.i, adj.j
+    li = labels[i]
+    inner = (li == labels[j]) & (li > 0)
+    # The outline (a face with an edge out of its region or on the mesh's border) is ring 0;
+    # unlabelled faces and regions too small to hold two cores are left out from the start.
+    reached = labels == 0
+    reached[i[~inner]] = True
+    reached[j[~inner]] = True
+    reached |= adj.neighbour_count() < 3
+    reached |= (np.bincount(labels, weights=areas) < 2 * min_core)[labels]
+    i, j = i[inner], j[inner]
+    for _ in range(rings):
+        ri, rj = reached[i], reached[j]
+        # Both ends of an edge with an end reached are reached after this ring: it is done.
+        reached[j[ri]] = True
+        reached[i[rj]] = True
+        far = ~(ri | rj)
+        i, j = i[far], j[far]
+    core = ~reached
+    # A region whose cores together are under two parts' area cannot split.
+    room = np.bincount(labels[core], weights=areas[core], minlength=int(labels.max()) + 1)
+    core &= (room >= 2 * min_core)[labels]
+    both = core[i] & core[j]
+    i, j = i[both], j[both]
+    cores = np.flatnonzero(core)
+    if not len(cores):
+        return labels
+    index = np.zeros(m, dtype=np.int64)
+    index[cores] = np.arange(len(cores))
+    graph = sp.csr_matrix((np.ones(len(i)), (index[i], index[j])), shape=(len(cores),) * 2)
+    n, part = connected_components(graph, directed=False)
+    big = np.bincount(part, weights=areas[cores], minlength=n) >= min_core
+    owner = np.zeros(n, dtype=np.int64)
+    owner[part] = labels[cores]
+    split = np.bincount(owner[big], minlength=int(labels.max()) + 1) >= 2
+    split[0] = False
+    if not split.any():
+        return labels
+    out = np.where(split[labels], 0, labels).astype(np.int32)
+    kept = big & split[owner]
+    ids = np.zeros(n, dtype=np.int32)
+    ids[kept] = int(labels.max()) + 1 + np.arange(int(kept.sum()), dtype=np.int32)
+    seeded = kept[part]
+    out[cores[seeded]] = ids[part[seeded]]
+    # The fronts stay inside the region they split.
+    along = labels[adj.src] == labels[adj.dst]
+    return hand_back(out, adj, split[labels], along=along)
 
 
 def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:

@@ -14,7 +14,10 @@ Two presets of :class:`SegmentParams`:
   ``t = 0.93`` (stricter than the paper's 0.7 and the authors' code's 0.81: Poisson rounds contact
   creases, and a looser test merges touching rocks); seeds from the most convex faces; every
   region smaller than a share of the smallest rock of interest is a fragment and is merged into
-  the neighbouring region it shares the longest border with; the valley faces are handed back to
+  the neighbouring region it shares the longest border with; a region whose faces more than a
+  valley radius in from its outline fall into two or more parts of a fragment's area or more is
+  split into them at the necks between them (the search ran from one rock into the next through
+  a gap in the valley band, see ``split_at_necks``); the valley faces are handed back to
   the regions they border, growing from both sides of a valley until they meet (those that no
   region reaches going down into the valley within about a valley radius stay out of every
   rock, see ``valley_reach``); a region that faces down and borders only ground is dropped (an
@@ -52,7 +55,13 @@ import numpy as np
 import numpy.typing as npt
 
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
-from .cleanup import drop_facing_down, hand_back, merge_convex_borders, merge_fragments
+from .cleanup import (
+    drop_facing_down,
+    hand_back,
+    merge_convex_borders,
+    merge_fragments,
+    split_at_necks,
+)
 from .criterion import edge_scores
 from .ground import ground_height
 from .params import RINGS_PER_EDGE, RockScale, SegmentParams, median_edge, rock_scale
@@ -65,6 +74,7 @@ __all__ = ['STEPS', 'Segmentation', 'segment_mesh']
 STEPS = (
     'search',
     'fragments',
+    'necks',
     'valleys near',
     'valleys all',
     'undersides',
@@ -238,6 +248,10 @@ def segment_mesh(
             adj.neighbour_count(),
         )
         step('fragments', labels)
+        if p.neck_radii > 0:
+            rings = math.ceil(RINGS_PER_EDGE * p.neck_radii * valley_radius / edge)
+            labels = split_at_necks(labels, adj, geom.areas, rings, min_area)
+            step('necks', labels)
     far = np.zeros(m, dtype=bool)
     if valley.any():
         if p.valley_reach > 0:
