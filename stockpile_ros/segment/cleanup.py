@@ -24,6 +24,7 @@ __all__ = [
     'merge_convex_borders',
     'merge_fragments',
     'split_at_necks',
+    'split_into_parts',
 ]
 
 
@@ -155,14 +156,63 @@ def merge_fragments(
         labels = target[labels].astype(np.int32)
 
 
+def split_into_parts(
+    labels: I32, adj: FaceAdjacency, areas: F64, solid: npt.NDArray[np.bool_], least: F64
+) -> I32:
+    """Split each region whose ``solid`` faces fall into two or more large connected parts.
+
+    Within a region, the solid faces fall into connected parts; where two or more of them hold
+    at least ``least[region]`` area each, those become regions of their own and the rest of the
+    region (what is not solid, and the small parts) goes, front by front within the region, to
+    the part that reaches it first (see ``hand_back``). Other regions are left alone.
+
+    Args:
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        areas: Face areas.
+        solid: Per face, whether it can hold a part together.
+        least: Per region id, the least area of a part.
+
+    Returns:
+        The labels, each split region's parts numbered after every existing id.
+
+    """
+    m = len(labels)
+    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
+    solid = solid & (labels > 0)
+    keep = same & solid[adj.i] & solid[adj.j]
+    faces = np.flatnonzero(solid)
+    if not len(faces):
+        return labels
+    # The graph of the solid faces alone: the parts are numbered by their first face either way.
+    index = np.zeros(m, dtype=np.int64)
+    index[faces] = np.arange(len(faces))
+    i, j = index[adj.i[keep]], index[adj.j[keep]]
+    graph = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(len(faces),) * 2)
+    n, part = connected_components(graph, directed=False)
+    owner = np.zeros(n, dtype=np.int64)
+    owner[part] = labels[faces]
+    big = np.bincount(part, weights=areas[faces], minlength=n) >= least[owner]
+    split = np.bincount(owner[big], minlength=len(least)) >= 2
+    split[0] = False
+    if not split.any():
+        return labels
+    out = np.where(split[labels], 0, labels).astype(np.int32)
+    kept = big & split[owner]
+    ids = np.zeros(n, dtype=np.int32)
+    ids[kept] = int(labels.max()) + 1 + np.arange(int(kept.sum()), dtype=np.int32)
+    seeded = kept[part]
+    out[faces[seeded]] = ids[part[seeded]]
+    return hand_back(out, FaceAdjacency(m, adj.i[same], adj.j[same]), split[labels])
+
+
 def split_at_necks(labels: I32, adj: FaceAdjacency, areas: F64, rings: int, min_core: float) -> I32:
     """Split each region that a neck joins: parts wider than ``2 rings`` linked by a narrow pass.
 
     Each region is eroded by ``rings`` rings of faces from its outline (its edges to every other
     label, 0 included, and the mesh's border); where what is left (its cores) falls into two or
-    more parts of at least ``min_core`` area each, those parts become regions of their own and
-    the rest of the region goes, front by front within it, to the core that reaches it first.
-    Smaller cores are no part of their own: the fronts take them.
+    more parts of at least ``min_core`` area each, the region is split into them (see
+    ``split_into_parts``).
 
     Args:
         labels: Per-face region ids (0 = excluded).
@@ -175,17 +225,17 @@ def split_at_necks(labels: I32, adj: FaceAdjacency, areas: F64, rings: int, min_
         The labels, each split region's parts numbered after every existing id.
 
     """
-    m = len(labels)
     i, j = adj.i, adj.j
     li = labels[i]
     inner = (li == labels[j]) & (li > 0)
     # The outline (a face with an edge out of its region or on the mesh's border) is ring 0;
     # unlabelled faces and regions too small to hold two cores are left out from the start.
+    area = np.bincount(labels, weights=areas)
     reached = labels == 0
     reached[i[~inner]] = True
     reached[j[~inner]] = True
     reached |= adj.neighbour_count() < 3
-    reached |= (np.bincount(labels, weights=areas) < 2 * min_core)[labels]
+    reached |= (area < 2 * min_core)[labels]
     i, j = i[inner], j[inner]
     for _ in range(rings):
         ri, rj = reached[i], reached[j]
@@ -196,33 +246,9 @@ def split_at_necks(labels: I32, adj: FaceAdjacency, areas: F64, rings: int, min_
         i, j = i[far], j[far]
     core = ~reached
     # A region whose cores together are under two parts' area cannot split.
-    room = np.bincount(labels[core], weights=areas[core], minlength=int(labels.max()) + 1)
+    room = np.bincount(labels[core], weights=areas[core], minlength=len(area))
     core &= (room >= 2 * min_core)[labels]
-    both = core[i] & core[j]
-    i, j = i[both], j[both]
-    cores = np.flatnonzero(core)
-    if not len(cores):
-        return labels
-    index = np.zeros(m, dtype=np.int64)
-    index[cores] = np.arange(len(cores))
-    graph = sp.csr_matrix((np.ones(len(i)), (index[i], index[j])), shape=(len(cores),) * 2)
-    n, part = connected_components(graph, directed=False)
-    big = np.bincount(part, weights=areas[cores], minlength=n) >= min_core
-    owner = np.zeros(n, dtype=np.int64)
-    owner[part] = labels[cores]
-    split = np.bincount(owner[big], minlength=int(labels.max()) + 1) >= 2
-    split[0] = False
-    if not split.any():
-        return labels
-    out = np.where(split[labels], 0, labels).astype(np.int32)
-    kept = big & split[owner]
-    ids = np.zeros(n, dtype=np.int32)
-    ids[kept] = int(labels.max()) + 1 + np.arange(int(kept.sum()), dtype=np.int32)
-    seeded = kept[part]
-    out[cores[seeded]] = ids[part[seeded]]
-    # The fronts stay inside the region they split.
-    along = labels[adj.src] == labels[adj.dst]
-    return hand_back(out, adj, split[labels], along=along)
+    return split_into_parts(labels, adj, areas, core, np.full(len(area), min_core))
 
 
 def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:

@@ -13,10 +13,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from scipy import sparse
-from scipy.sparse.csgraph import connected_components
 
 from .adjacency import FaceAdjacency, FaceGeometry
-from .cleanup import hand_back
+from .cleanup import split_into_parts
 
 __all__ = [
     'COARSE_CELLS',
@@ -222,7 +221,7 @@ def split_at_valleys(
     Within a region, the faces that are not deep fall into connected parts. Where two or more of
     them each hold at least ``min_share`` of the region's area, each becomes a region of its own
     and the rest of the region (the valley and any small parts) is handed back to them, within
-    the region only (see ``hand_back``). Other regions are left alone.
+    the region only (see ``split_into_parts``). Other regions are left alone.
 
     Args:
         labels: Per-face region ids (0 = excluded).
@@ -235,25 +234,5 @@ def split_at_valleys(
         The labels, split regions under new ids.
 
     """
-    m = len(labels)
-    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
-    keep = same & ~deep[adj.i] & ~deep[adj.j]
-    graph = sparse.csr_matrix((np.ones(int(keep.sum())), (adj.i[keep], adj.j[keep])), shape=(m, m))
-    _, part = connected_components(graph, directed=False)
-    solid = (labels > 0) & ~deep
-    part_area = np.bincount(part[solid], weights=areas[solid], minlength=m)
-    region_area = np.bincount(labels, weights=areas)
-    big = solid & (part_area[part] >= min_share * region_area[labels])
-    # One key per (region, part) pair: a 1-D unique sorts far faster than rows of pairs.
-    pairs = np.unique(labels[big].astype(np.int64) * m + part[big])
-    regions = pairs // m
-    split = np.bincount(regions, minlength=len(region_area)) >= 2
-    split[0] = False
-    if not split.any():
-        return labels
-    in_split = split[labels]
-    out = np.where(in_split, 0, labels).astype(np.int32)
-    sel = in_split & big
-    _, new = np.unique(part[sel], return_inverse=True)
-    out[sel] = int(labels.max()) + 1 + new.ravel()
-    return hand_back(out, FaceAdjacency(m, adj.i[same], adj.j[same]), in_split)
+    least = np.bincount(labels, weights=areas) * np.float64(min_share)
+    return split_into_parts(labels, adj, areas, ~deep, least)
