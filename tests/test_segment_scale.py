@@ -24,7 +24,7 @@ from stockpile_ros.segment.params import (
     median_edge,
     rock_scale,
 )
-from stockpile_ros.segment.pipeline import analyse_mesh
+from stockpile_ros.segment.pipeline import TRUNCATED_MIN_ROCKS, analyse_mesh, truncation_warnings
 from stockpile_ros.segment.segmentation import segment_mesh
 
 F64 = npt.NDArray[np.float64]
@@ -187,6 +187,38 @@ def test_a_rock_of_interest_under_sharp_edges_is_warned_about() -> None:
     assert warned(0.8 * SHARP_EDGES)
     assert not warned(1.1 * SHARP_EDGES)
     assert not any('to edges of' in w for w in analyse_mesh(v, f).report.warnings)
+
+
+def test_sizes_cut_by_the_mesh_floor_are_warned_about() -> None:
+    # Rocks spread evenly by mass in log size between lo and 4 b0: eight times more rocks for
+    # each halving of b. Cut by the floor (lo under b0) the band just above it is the fullest.
+    b0 = 0.1
+    scale = rock_scale(SegmentParams(), b0 / SegmentParams().min_rock_edges)
+
+    def sizes(lo: float) -> list[float]:
+        edges = np.geomspace(lo, 4 * b0, 9)
+        counts = np.round(400 * (edges[0] / edges[:-1]) ** 3).astype(int)
+        b = np.concatenate(
+            [np.full(n, np.sqrt(x * y)) for n, x, y in zip(counts, edges, edges[1:], strict=False)]
+        )
+        return [float(x) for x in b if x >= b0]
+
+    (text,) = truncation_warnings(scale, sizes(0.5 * b0), 'm')
+    assert 'do not fall off towards 0.1 m' in text and '(20 median edge lengths)' in text
+    assert truncation_warnings(scale, sizes(1.6 * b0), 'm') == []
+    # Pieces of larger rocks just above the floor are fewer than the rocks of the fullest band.
+    pieces = [1.1 * b0] * TRUNCATED_MIN_ROCKS
+    assert truncation_warnings(scale, pieces + sizes(1.6 * b0), 'm') == []
+    assert truncation_warnings(scale, pieces + [1.9 * b0] * 3, 'm') == []
+    assert truncation_warnings(scale, pieces + [1.9 * b0] * 2, 'm')
+    # Too few to tell, or a smallest rock given: the floor is what was asked for.
+    assert truncation_warnings(scale, [1.1 * b0] * (TRUNCATED_MIN_ROCKS - 1), 'm') == []
+    given = rock_scale(SegmentParams(min_rock_b=b0), scale.edge)
+    assert truncation_warnings(given, sizes(0.5 * b0), 'm') == []
+    # Through the pipeline: 36 rocks of b 1.17 on a mesh resolving 0.85 warn, on one resolving
+    # 0.43 do not.
+    assert any('do not fall off' in w for w in analyse_mesh(*_bumps(6, 32)).report.warnings)
+    assert not any('do not fall off' in w for w in analyse_mesh(*_bumps(6, 64)).report.warnings)
 
 
 def test_fragments_are_judged_by_area_not_by_face_count() -> None:

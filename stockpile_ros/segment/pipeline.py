@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -32,11 +32,31 @@ from .measure import (
     split_sheets,
     visibility_warnings,
 )
-from .params import SHARP_EDGES, SegmentParams
+from .params import SHARP_EDGES, RockScale, SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
-__all__ = ['Analysis', 'Measured', 'analyse_mesh', 'grade', 'principal_axes', 'segment_and_measure']
+__all__ = [
+    'TRUNCATED_MIN_ROCKS',
+    'TRUNCATED_RATIO',
+    'Analysis',
+    'Measured',
+    'analyse_mesh',
+    'grade',
+    'principal_axes',
+    'segment_and_measure',
+    'truncation_warnings',
+]
+
+#: Fewest rocks in the band just above the mesh's smallest resolved rock for
+#: ``truncation_warnings`` to read the pile's sizes as cut there (fewer is chance).
+TRUNCATED_MIN_ROCKS = 5
+
+#: How many times the rocks of any other band ``truncation_warnings`` asks of the band just
+#: above the floor: between the 2.8 of a pile spread evenly by mass in log size (2.5-3.7 on
+#: bench/bench_yardstick.py's beds with the floor at their smallest b) and the 1 or less of
+#: pieces above a floor under the pile's smallest rocks.
+TRUNCATED_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -125,6 +145,52 @@ def _resolution_warnings(seg: Segmentation) -> list[str]:
         f'recall was 0.81-0.90 at 20 edge lengths and 0.89-0.93 at {SHARP_EDGES:g}, the lost '
         'rocks joined to a neighbour. For a check, capture the pile closer or reconstruct it '
         f'finer, to edges of {scale.requested / SHARP_EDGES:.3g} m or less.'
+    ]
+
+
+def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) -> list[str]:
+    """Return a warning when the pile's sizes do not fall off towards the smallest rock resolved.
+
+    With no smallest rock of interest given (by ``min_rock_b`` or a class), the mesh's floor
+    (``min_rock_edges`` median edge lengths, ``b0``) sets what is a rock: smaller ones are joined
+    to a neighbour or left out, silently. A pile holds more rocks the smaller they are (one of
+    rocks spread evenly by mass in log size about eight times more per halving of b), so where
+    the floor cuts into its sizes the band ``[b0, sqrt 2 b0)`` holds the most rocks of any band of
+    that width, about 2.8 times the next; where the pile's smallest rocks lie above the floor it
+    holds pieces of larger rocks and partly seen ones (on the README's reconstructed piles 2-4
+    rocks, no more than the fullest band of true rocks). The warning comes when it holds
+    ``TRUNCATED_RATIO`` times as many as any other band, and ``TRUNCATED_MIN_ROCKS`` or more: the
+    pile's gradation is then that of its rocks from about ``b0`` up.
+
+    Args:
+        scale: The segmentation's scale (``Segmentation.scale``).
+        sizes: The b of every rock measured, in the units of ``scale``.
+        units: Their name, for the message.
+
+    Returns:
+        The warning, or nothing.
+
+    """
+    b0 = scale.min_rock_b
+    if scale.source != 'mesh' or b0 <= 0 or scale.edge <= 0:
+        return []
+    b = np.asarray(sizes, dtype=np.float64)
+    # Bands of a factor sqrt 2 from b0 up; the first also takes what measures under b0.
+    band = np.floor(2.0 * np.log2(np.maximum(b, b0) / b0)).astype(np.int64)
+    counts = np.bincount(band, minlength=1)
+    low = int(counts[0])
+    if low < TRUNCATED_MIN_ROCKS or low < TRUNCATED_RATIO * counts[1:].max(initial=0):
+        return []
+    return [
+        f'{low} of {len(b)} rocks measure b under {np.sqrt(2.0) * b0:.3g} {units}, against at '
+        f'most {int(counts[1:].max(initial=0))} in any other band of sizes a factor 1.41 wide: '
+        'the sizes do not fall off towards '
+        f'{b0:.3g} {units}, the '
+        f'smallest rock this mesh resolves ({b0 / scale.edge:.0f} median edge lengths), so the '
+        'pile may hold smaller rocks, joined to neighbours or left out: its gradation is that '
+        'of the rocks from about that size up. Capture the pile closer or reconstruct it finer '
+        'to count them, or give the smallest rock that matters (segment.min_rock_b, or a class '
+        'to check) if they do not.'
     ]
 
 
@@ -290,6 +356,7 @@ def analyse_mesh(
             'm' if metric else 'model units',
             seg.params.ground_window_b * seg.scale.max_rock_b > 0,
         )
-        + visibility_warnings(rocks),
+        + visibility_warnings(rocks)
+        + truncation_warnings(seg.scale, [r.b for r in rocks], 'm' if metric else 'model units'),
     )
     return Analysis(v, f, colors, seg, rocks, report)
