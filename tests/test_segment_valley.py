@@ -33,8 +33,9 @@ def _domes(x: F64, y: F64) -> F64:
     return np.asarray(soft)
 
 
-# The domes are the rocks of interest: 10 cm across.
-DOMES = SegmentParams(min_rock_b=0.1)
+# The domes are the rocks of interest: 10 cm across. The valley split at its measured depth (off
+# by default since the neck split).
+DOMES = SegmentParams(min_rock_b=0.1, split_depth_ratio=0.067)
 
 
 def _valley_area_near(v: F64, f: npt.NDArray[np.int64], x0: float) -> tuple[float, float]:

@@ -223,11 +223,17 @@ class SegmentParams:
         split_depth_ratio: Faces deeper than this under their surroundings at the scale
             ``split_radius_b`` cut a region; where they cut it into two or more parts of at
             least ``split_min_share`` of its area each, the parts become regions of their own (see
-            ``split_at_valleys``); 0 disables [in units of the split radius] [0]. On twelve
-            reconstructed piles 1 mm at 15 mm split one region, two touching rocks joined through
-            a gap in the narrower valley (recall 0.905 -> 0.912, median b error 5.1 % -> 4.8 %,
-            worst D50 error 16.4 % -> 6.9 %); 0.8 mm and 1.3 mm measured the same or better,
-            0.6 mm began to split single rocks.
+            ``split_at_valleys``); 0 disables [in units of the split radius] [0; off by default].
+            On twelve reconstructed piles 1 mm at 15 mm (0.067) split one region, two touching
+            rocks joined through a gap in the narrower valley (recall 0.905 -> 0.912, median b
+            error 5.1 % -> 4.8 %, worst D50 error 16.4 % -> 6.9 %). The neck split
+            (``neck_radii``) now parts such rocks earlier, and 0.067 after it only cut rocks: on
+            bench/bench_yardstick.py's twelve rows (seeds 1 and 2, 20 and 30 edges) 0 took
+            precision up on eight (by 0.006-0.031) and down on one (by 0.001), recall up on five
+            and down on one (cobble, seed 1, 20 edges: 0.883 -> 0.875), the D50 error of seed
+            2's aggregate bed from -10.4 to -6.3 % and -8.4 to -2.7 % at 20 and 30 edges; the
+            five reconstructed piles of the README and bench/bench_scale.py's six came out the
+            same, and the default mode runs without the split radius's smoothing.
         split_radius_b: Scale of the surroundings for ``split_depth_ratio`` [in units of
             ``min_rock_b``; 0.15 is the 15 mm (3 edge lengths) measured on reconstructed piles
             when ``min_rock_b`` comes from the mesh]. Never under ``split_min_edges`` edge lengths.
@@ -261,7 +267,7 @@ class SegmentParams:
     valley_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.075
     valley_min_edges: Annotated[float, Range(0.0, 100.0)] = 4.0
     valley_reach: Annotated[float, Range(0.0, 100.0)] = 1.0
-    split_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
+    split_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.0
     split_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.15
     split_min_edges: Annotated[float, Range(0.0, 100.0)] = 8.0
     split_min_share: Annotated[float, Range(0.0, 0.5)] = 0.1

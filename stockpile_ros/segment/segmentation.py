@@ -24,9 +24,9 @@ Two presets of :class:`SegmentParams`:
   underside cut off from its rock); then neighbouring regions whose union stays convex across
   their shared border are joined (on reconstructed piles, noise stops the search inside single
   rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
-  ``merge_convex_borders``); last, a region that a wider valley cuts into two or more large parts
-  is split into them (two touching rocks that the search joined through a gap in the narrower
-  valley, see ``split_at_valleys``).
+  ``merge_convex_borders``). A region that a wider valley cuts into two or more large parts can
+  be split into them last (``split_depth_ratio``, see ``split_at_valleys``): off by default, as
+  the neck split parts the rocks it was for and it cut single rough rocks.
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
