@@ -32,7 +32,9 @@ and against the visible ones). One row per material and resolution;
 ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU time of
 ``segment_and_measure`` on one thread (which cores shared with other work do not inflate), and
 its growth with the face count (a least-squares power law over the resolutions) ends each
-material. With ``--steps`` each row is followed by what each step of ``segment_mesh`` left of
+material; ``floor`` says ``cuts`` where a report would warn that the mesh's floor cuts the pile's
+sizes (``truncation_warnings``: only with no smallest rock given, ``--set min_rock_b=0``).
+With ``--steps`` each row is followed by what each step of ``segment_mesh`` left of
 the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
 at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
 gains and which loses rocks (from the row's own run, whose seconds then include copying the
@@ -68,7 +70,7 @@ import numpy as np  # noqa: E402
 from stockpile_ros.cloud.mesh import CloudOptions  # noqa: E402
 from stockpile_ros.segment.measure import MeasureParams  # noqa: E402
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
-from stockpile_ros.segment.pipeline import segment_and_measure  # noqa: E402
+from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     OUTCOMES,
     SizedRock,
@@ -168,7 +170,7 @@ def main() -> None:
           f'{args.wave} largest b over {args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
-          'merges splits  |b err| b bias  D50 err  D50 vis  seconds')  # fmt: skip
+          'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor')  # fmt: skip
     for material in args.materials:
         placed = bed(material, args.rocks, args.seed, args.cache)
         lo, hi = MATERIALS[material]
@@ -204,11 +206,15 @@ def main() -> None:
                 {r.id: SizedRock(r.b, r.mass) for r in rocks},
             )
             edges = lo / seg.scale.edge
+            # Whether a report would say the mesh's floor cuts the sizes (only with no smallest
+            # rock given: --set min_rock_b=0).
+            cut = truncation_warnings(seg.scale, [r.b for r in rocks], 'm')
+            floor = 'cuts' if cut else '-'
             print(f'{material:9s} {lo:4.2f}-{hi:4.2f}  {edges:7.1f} {len(surface.faces):8d} '
                   f'{s.visible:7d} {s.reported:8d} {s.found:5d} {s.recall:6.3f} '
                   f'{s.precision:9.3f} {s.merges:6d} {s.splits:6d}  {100 * s.b_error:6.1f}% '
                   f'{100 * s.b_bias:+5.1f}% {100 * s.d50_error:+6.1f}%  '
-                  f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}',
+                  f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}  {floor}',
                   flush=True)  # fmt: skip
             cost.append((len(surface.faces), seconds))
             seen = MatchOptions().visible_threshold
