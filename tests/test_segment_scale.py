@@ -199,7 +199,10 @@ def test_sizes_cut_by_the_mesh_floor_are_warned_about() -> None:
         edges = np.geomspace(lo, 4 * b0, 9)
         counts = np.round(400 * (edges[0] / edges[:-1]) ** 3).astype(int)
         b = np.concatenate(
-            [np.full(n, np.sqrt(x * y)) for n, x, y in zip(counts, edges, edges[1:], strict=False)]
+            [
+                np.full(n, np.sqrt(x * y))
+                for n, x, y in zip(counts, edges[:-1], edges[1:], strict=True)
+            ]
         )
         return [float(x) for x in b if x >= b0]
 

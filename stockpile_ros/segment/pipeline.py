@@ -153,8 +153,8 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
 
     With no smallest rock of interest given (by ``min_rock_b`` or a class), the mesh's floor
     (``min_rock_edges`` median edge lengths, ``b0``) sets what is a rock: smaller ones are joined
-    to a neighbour or left out, silently. A pile holds more rocks the smaller they are (one of
-    rocks spread evenly by mass in log size about eight times more per halving of b), so where
+    to a neighbour or left out, silently. A pile holds more rocks the smaller they are (one
+    spread evenly by mass in log size about eight times more per halving of b), so where
     the floor cuts into its sizes the band ``[b0, sqrt 2 b0)`` holds the most rocks of any band of
     that width, about 2.8 times the next; where the pile's smallest rocks lie above the floor it
     holds pieces of larger rocks and partly seen ones (on the README's reconstructed piles 2-4
@@ -184,13 +184,11 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
     return [
         f'{low} of {len(b)} rocks measure b under {np.sqrt(2.0) * b0:.3g} {units}, against at '
         f'most {int(counts[1:].max(initial=0))} in any other band of sizes a factor 1.41 wide: '
-        'the sizes do not fall off towards '
-        f'{b0:.3g} {units}, the '
-        f'smallest rock this mesh resolves ({b0 / scale.edge:.0f} median edge lengths), so the '
-        'pile may hold smaller rocks, joined to neighbours or left out: its gradation is that '
-        'of the rocks from about that size up. Capture the pile closer or reconstruct it finer '
-        'to count them, or give the smallest rock that matters (segment.min_rock_b, or a class '
-        'to check) if they do not.'
+        f'the sizes do not fall off towards {b0:.3g} {units}, the smallest rock this mesh '
+        f'resolves ({b0 / scale.edge:.0f} median edge lengths), so the pile may hold smaller '
+        'rocks, joined to neighbours or left out: its gradation is that of the rocks from about '
+        'that size up. Capture the pile closer or reconstruct it finer to count them, or give '
+        'the smallest rock that matters (segment.min_rock_b, or a class to check) if they do not.'
     ]
 
 
