@@ -178,12 +178,12 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
     # Bands of a factor sqrt 2 from b0 up; the first also takes what measures under b0.
     band = np.floor(2.0 * np.log2(np.maximum(b, b0) / b0)).astype(np.int64)
     counts = np.bincount(band, minlength=1)
-    low = int(counts[0])
-    if low < TRUNCATED_MIN_ROCKS or low < TRUNCATED_RATIO * counts[1:].max(initial=0):
+    low, other = int(counts[0]), int(counts[1:].max(initial=0))
+    if low < TRUNCATED_MIN_ROCKS or low < TRUNCATED_RATIO * other:
         return []
     return [
         f'{low} of {len(b)} rocks measure b under {np.sqrt(2.0) * b0:.3g} {units}, against at '
-        f'most {int(counts[1:].max(initial=0))} in any other band of sizes a factor 1.41 wide: '
+        f'most {other} in any other band of sizes a factor 1.41 wide: '
         f'the sizes do not fall off towards {b0:.3g} {units}, the smallest rock this mesh '
         f'resolves ({b0 / scale.edge:.0f} median edge lengths), so the pile may hold smaller '
         'rocks, joined to neighbours or left out: its gradation is that of the rocks from about '
