@@ -1,7 +1,7 @@
 """The clean-ups after the search.
 
-Faces handed back to their neighbours, fragments merged, undersides dropped, and neighbours
-joined where the border between them is convex.
+Faces handed back to their neighbours, fragments merged, regions split at necks and under their
+hulls, undersides dropped, and neighbours joined where the border between them is convex.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ __all__ = [
     'merge_fragments',
     'split_at_necks',
     'split_into_parts',
+    'split_under_hulls',
 ]
 
 
@@ -36,6 +37,9 @@ BORDER_SAMPLES = 256
 
 
 HULL_SAMPLES = 500
+
+# Faces per block of the faces-by-facets products in ``split_under_hulls``.
+HULL_CHUNK = 4096
 
 
 def hand_back(
@@ -249,6 +253,81 @@ def split_at_necks(labels: I32, adj: FaceAdjacency, areas: F64, rings: int, min_
     room = np.bincount(labels[core], weights=areas[core], minlength=len(area))
     core &= (room >= 2 * min_core)[labels]
     return split_into_parts(labels, adj, areas, core, np.full(len(area), min_core))
+
+
+def _under_hull(points: F64, eq: F64, depth: float) -> npt.NDArray[np.bool_]:
+    """Whether each point lies deeper than ``depth`` under every facet plane of ``eq``."""
+    height: F64 = (points @ eq[:, :3].T + eq[:, 3]).max(axis=1)
+    return height < -depth
+
+
+def split_under_hulls(
+    vertices: F64,
+    geom: FaceGeometry,
+    labels: I32,
+    adj: FaceAdjacency,
+    faces: npt.NDArray[np.int64],
+    max_depth: float,
+    min_part: float,
+    outside: npt.NDArray[np.bool_],
+) -> I32:
+    """Split each region that a band of faces deep under its own convex hull cuts into parts.
+
+    One convex rock's surface lies on its hull; where two touching rocks share a region, the
+    crease between them lies under the hull of the pair. Each region of at least two parts' area
+    is taken apart at its faces deeper than ``max_depth`` under the hull of its vertices (the
+    distance to the nearest facet's plane); where the rest falls into two or more parts of at
+    least ``min_part`` area each, those become regions (see ``split_into_parts``). The hull is
+    that of the corners of an even stride of its faces, and a region is looked into where one
+    of an even stride of ``BORDER_SAMPLES`` of its faces is that deep (a band that cuts a region
+    is many faces long).
+
+    Args:
+        vertices: Nx3 vertex positions.
+        geom: Face centroids and areas.
+        labels: Per-face region ids (0 = excluded).
+        adj: Face adjacency.
+        faces: Mx3 triangles.
+        max_depth: Depth under the hull beyond which a face holds no part together [m].
+        min_part: Least area of a part.
+        outside: Faces that belong to no rock in the end (far valley faces): they neither shape
+            a region's hull nor hold a part together.
+
+    Returns:
+        The labels, each split region's parts numbered after every existing id.
+
+    """
+    area = np.bincount(labels, weights=geom.areas)
+    solid = ~outside
+    cut = np.zeros(len(area), dtype=bool)
+    order = np.argsort(labels, kind='stable')
+    bounds = np.searchsorted(labels[order], np.arange(len(area) + 1))
+    for region in np.flatnonzero(area >= 2 * min_part):
+        idx = order[bounds[region] : bounds[region + 1]]
+        idx = idx[solid[idx]]
+        if region == 0 or not len(idx):
+            continue
+        # The corners of an even stride of its faces, about ``HULL_SAMPLES`` points: a hull
+        # within a fraction of an edge of the whole one (see ``_hull_points``).
+        corners = vertices[faces[idx[:: -(-3 * len(idx) // HULL_SAMPLES)]].ravel()]
+        try:
+            eq = ConvexHull(corners).equations
+        except (QhullError, ValueError):
+            continue
+        # A strided sample of the faces first: where none of them is deep, the region is one
+        # convex rock and the faces-by-facets products of the whole region are not needed.
+        sample = idx[:: -(-len(idx) // BORDER_SAMPLES)]
+        if _under_hull(geom.centroids[sample], eq, max_depth).any():
+            cut[region] = True
+            for start in range(0, len(idx), HULL_CHUNK):
+                part = idx[start : start + HULL_CHUNK]
+                solid[part] = ~_under_hull(geom.centroids[part], eq, max_depth)
+    if not cut.any():
+        return labels
+    # Only the regions with a deep band hold solid faces to part: the others are left as they are.
+    return split_into_parts(
+        labels, adj, geom.areas, solid & cut[labels], np.full(len(area), min_part)
+    )
 
 
 def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:

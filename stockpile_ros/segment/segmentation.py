@@ -21,7 +21,10 @@ Two presets of :class:`SegmentParams`:
   the regions they border, growing from both sides of a valley until they meet (those that no
   region reaches going down into the valley within about a valley radius stay out of every
   rock, see ``valley_reach``); a region that faces down and borders only ground is dropped (an
-  underside cut off from its rock); then neighbouring regions whose union stays convex across
+  underside cut off from its rock); a region whose faces deep under its own convex hull cut it
+  into two or more parts of a fragment's area or more is split into them (two touching rocks
+  the search ran across where the crease between them is too shallow for the valley test at its
+  radius, see ``hull_split_depth``); then neighbouring regions whose union stays convex across
   their shared border are joined (on reconstructed piles, noise stops the search inside single
   rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
   ``merge_convex_borders``). A region that a wider valley cuts into two or more large parts can
@@ -61,6 +64,7 @@ from .cleanup import (
     merge_convex_borders,
     merge_fragments,
     split_at_necks,
+    split_under_hulls,
 )
 from .criterion import edge_scores
 from .ground import ground_height
@@ -78,6 +82,7 @@ STEPS = (
     'valleys near',
     'valleys all',
     'undersides',
+    'hull split',
     'convex join',
     'valley split',
     'far valleys out',
@@ -272,6 +277,10 @@ def segment_mesh(
         # borders it and stays.
         labels = drop_facing_down(labels, adj, geom.areas * geom.normals[:, 2])
         step('undersides', labels)
+    if p.hull_split_depth > 0 and min_area > 0:
+        depth = p.hull_split_depth * math.sqrt(min_area)
+        labels = split_under_hulls(v, geom, labels, adj, f, depth, min_area, far)
+        step('hull split', labels)
     if p.merge_convex:
         labels = merge_convex_borders(
             v, geom, labels, search, f, p.border_depth, p.border_min_edges
