@@ -290,8 +290,8 @@ def split_under_hulls(
         faces: Mx3 triangles.
         max_depth: Depth under the hull beyond which a face holds no part together [m].
         min_part: Least area of a part.
-        outside: Faces that belong to no rock in the end (far valley faces): they neither shape
-            a region's hull nor hold a part together.
+        outside: Faces that neither shape a region's hull nor hold a part together (valley
+            faces handed back to the regions).
 
     Returns:
         The labels, each split region's parts numbered after every existing id.

@@ -163,23 +163,23 @@ class SegmentParams:
             pile; 1224 faces, -0.29, on an 11-rock one) were reported as false rocks. Regions
             facing down that border others are left alone: on bench/bench_scale.py's many pile,
             merging those into a neighbour too gave 123 segments for 150 rocks (precision 0.81).
-        hull_split_depth: Before the convex join, each region is split at its faces deeper
-            than this under its own convex hull, where the rest falls into two
-            or more parts of at least a fragment's area each (see ``min_region_share`` and
-            ``split_under_hulls``; the far valley faces of ``valley_reach`` neither shape the hull
-            nor hold a part) [in units of the square root of a fragment's area, as
-            ``border_depth`` is of the smaller region's; 0: no split] [off]. One convex rock lies
+        hull_split: Before the convex join, split each region at its faces deeper under its
+            own convex hull than the join's ``border_depth`` of the square root of a fragment's
+            area (see ``min_region_share``), where the rest falls into two or more parts of at
+            least a fragment's area each (see ``split_under_hulls``) [off]. One convex rock lies
             on its hull; two touching rocks that the search ran across (their crease too wide
-            and shallow for the valley test at its radius) have it under theirs. 1.5 times the
-            join's depth, so that a part of a fragment's area the split leaves is one the join
-            would keep apart with room to spare. On bench/bench_yardstick.py's 300-rock beds
-            (seeds 1 and 2, 20 and 30 edges across the smallest b, twelve rows) 0.12 took the
-            mean recall from 0.872 to 0.882 and the mean precision from 0.873 to 0.874
-            (aggregate, seed 1, 30 edges: 0.892/0.907 -> 0.933/0.918; lowest on riprap, seed 2,
-            20 edges: 0.800/0.812 -> 0.792/0.780). The join's own 0.08 (measured with a form that
-            took every face's depth) gave 0.888/0.876 but cut a single rock of one of the five
-            reconstructed piles in two (seed 23: 12 of 12 rocks found -> 11); 0.12 leaves the
-            five as they were.
+            and shallow for the valley test at its radius) have the crease under theirs. At that
+            depth the join keeps a part of that area apart, so the two steps agree. Valley faces
+            neither shape the hull nor hold a part together: handed back, they are the flanks of
+            a crevice and of the rock beyond it, not evidence of a rock (with them, a
+            neighbour's flank became a part and cut large partly buried riprap; with only the far
+            ones left out, one of the five reconstructed piles lost a rock to a cut). On
+            bench/bench_yardstick.py's 300-rock beds (seeds 1 and 2, 20 and 30 edges across the
+            smallest b, twelve rows) the mean recall rose from 0.872 to 0.883 and the mean
+            precision from 0.873 to 0.877 (riprap, seed 1, 20 edges: 0.857/0.836 -> 0.882/0.854;
+            cobble, seed 2, 30 edges: 0.876/0.876 -> 0.905/0.886; lower on one row, riprap seed
+            2 at 20 edges, 0.800/0.812 -> 0.800/0.800); the five reconstructed piles and
+            bench/bench_scale.py's six segment as before.
         merge_convex: After the fragment merge, join neighbouring regions whose union is convex
             across their shared border (see ``merge_convex_borders``) [off]: on a
             reconstructed mesh, noise stops the search inside single rocks.
@@ -277,7 +277,7 @@ class SegmentParams:
     neck_radii: Annotated[float, Range(0.0, 100.0)] = 1.0
     fragment_min_border: Annotated[float, Range(0.0, 1.0)] = 0.1
     drop_facing_down: bool = True
-    hull_split_depth: Annotated[float, Range(0.0, 10.0)] = 0.12
+    hull_split: bool = True
     merge_convex: bool = True
     border_depth: Annotated[float, Range(0.0, 10.0)] = 0.08
     border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
@@ -304,7 +304,7 @@ class SegmentParams:
             neck_radii=0.0,
             fragment_min_border=0.0,
             drop_facing_down=False,
-            hull_split_depth=0.0,
+            hull_split=False,
             merge_convex=False,
             valley_depth_ratio=0.0,
             split_depth_ratio=0.0,

@@ -24,7 +24,7 @@ Two presets of :class:`SegmentParams`:
   underside cut off from its rock); a region whose faces deep under its own convex hull cut it
   into two or more parts of a fragment's area or more is split into them (two touching rocks
   the search ran across where the crease between them is too shallow for the valley test at its
-  radius, see ``hull_split_depth``); then neighbouring regions whose union stays convex across
+  radius, see ``hull_split``); then neighbouring regions whose union stays convex across
   their shared border are joined (on reconstructed piles, noise stops the search inside single
   rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
   ``merge_convex_borders``). A region that a wider valley cuts into two or more large parts can
@@ -277,9 +277,10 @@ def segment_mesh(
         # borders it and stays.
         labels = drop_facing_down(labels, adj, geom.areas * geom.normals[:, 2])
         step('undersides', labels)
-    if p.hull_split_depth > 0 and min_area > 0:
-        depth = p.hull_split_depth * math.sqrt(min_area)
-        labels = split_under_hulls(v, geom, labels, adj, f, depth, min_area, far)
+    if p.hull_split and min_area > 0:
+        # At the depth at which the convex join keeps a part of a fragment's area apart.
+        depth = p.border_depth * math.sqrt(min_area)
+        labels = split_under_hulls(v, geom, labels, adj, f, depth, min_area, valley)
         step('hull split', labels)
     if p.merge_convex:
         labels = merge_convex_borders(
