@@ -27,8 +27,7 @@ def _split(
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32], FaceGeometry]:
     """One region on the faces of ``z`` above 5 mm (2 mm cells), split under its hull.
 
-    The region is 12 cm wide but 6 cm at x = 0: two rocks touching show a waist in plan, and
-    the ends of the crease between them lie inside the hull, not on its flat sides.
+    The region is 12 cm wide but narrows to 6 cm at x = 0, as two touching rocks do in plan.
     """
     v, f = height_field(z, 0.3, 301)
     geom = face_geometry(v, f)
@@ -84,8 +83,8 @@ def test_one_convex_rock_lies_on_its_hull_and_stays_whole() -> None:
 
 
 def test_faces_left_out_of_every_rock_neither_shape_the_hull_nor_hold_a_part() -> None:
-    # The right rock's faces are far valley faces: the left rock alone shapes the hull, lies on
-    # it, and nothing is split.
+    # The right rock's faces are valley faces: the left rock alone shapes the hull, lies on it,
+    # and nothing is split.
     out, labels, _ = _split(_two_caps, depth=0.001, min_part=0.005, outside=lambda c: c[:, 0] > 0.0)
     assert np.array_equal(out, labels)
 

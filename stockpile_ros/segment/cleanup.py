@@ -23,6 +23,7 @@ __all__ = [
     'hand_back',
     'merge_convex_borders',
     'merge_fragments',
+    'region_bounds',
     'split_at_necks',
     'split_into_parts',
     'split_under_hulls',
@@ -40,6 +41,17 @@ HULL_SAMPLES = 500
 
 # Faces per block of the faces-by-facets products in ``split_under_hulls``.
 HULL_CHUNK = 4096
+
+
+def region_bounds(labels: I32) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Faces in order of their label, and where each label's run starts.
+
+    Returns:
+        ``order`` and ``bounds``: the faces of label ``k`` are ``order[bounds[k] : bounds[k + 1]]``.
+
+    """
+    order = np.argsort(labels, kind='stable')
+    return order, np.searchsorted(labels[order], np.arange(int(labels.max(initial=0)) + 2))
 
 
 def hand_back(
@@ -300,12 +312,11 @@ def split_under_hulls(
     area = np.bincount(labels, weights=geom.areas)
     solid = ~outside
     cut = np.zeros(len(area), dtype=bool)
-    order = np.argsort(labels, kind='stable')
-    bounds = np.searchsorted(labels[order], np.arange(len(area) + 1))
-    for region in np.flatnonzero(area >= 2 * min_part):
+    order, bounds = region_bounds(labels)
+    for region in np.flatnonzero(area[1:] >= 2 * min_part) + 1:
         idx = order[bounds[region] : bounds[region + 1]]
         idx = idx[solid[idx]]
-        if region == 0 or not len(idx):
+        if not len(idx):
             continue
         # The corners of an even stride of its faces, about ``HULL_SAMPLES`` points: a hull
         # within a fraction of an edge of the whole one (see ``_hull_points``).
@@ -417,8 +428,7 @@ def merge_convex_borders(
     labels = labels.copy()
     cache: dict[tuple[int, int], float] = {}
     # Each region's hull vertices, found once: the hull of a union is the hull of theirs.
-    order = np.argsort(labels, kind='stable')
-    bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
+    order, bounds = region_bounds(labels)
     hulls: dict[int, F64] = {}
     used = np.zeros(len(vertices), dtype=bool)
 

@@ -50,6 +50,7 @@ import numpy.typing as npt
 from scipy.spatial import ConvexHull, QhullError
 
 from ..ranges import Range
+from .cleanup import region_bounds
 from .segmentation import Segmentation
 
 __all__ = [
@@ -252,8 +253,7 @@ def measure_rocks(
     border = np.bincount(labels, weights=3 - n_neigh, minlength=int(labels.max()) + 1)
     contact = p.ground_contact_edges * seg.scale.edge
     out: list[RockMeasure] = []
-    order = np.argsort(labels, kind='stable')
-    bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
+    order, bounds = region_bounds(labels)
     for rock in range(1, int(labels.max()) + 1):
         idx = order[bounds[rock] : bounds[rock + 1]]
         if len(idx) < p.min_faces:
