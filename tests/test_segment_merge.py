@@ -8,13 +8,13 @@ from stockpile_ros.segment.adjacency import face_adjacency, face_geometry
 from stockpile_ros.segment.cleanup import merge_convex_borders
 
 
-def _split(kind: str, depth: float = 0.05) -> np.ndarray:
-    slope = -0.5 if kind == 'roof' else 0.5
-    v, f = height_field(lambda x, y: slope * np.abs(x), 1.0, 21)
+def _split(kind: str, depth: float = 0.05, slope: float = 0.5, floor: float = 0.0) -> np.ndarray:
+    sign = -1.0 if kind == 'roof' else 1.0
+    v, f = height_field(lambda x, y: sign * slope * np.abs(x), 1.0, 21)
     geom = face_geometry(v, f)
     adj = face_adjacency(f, len(v))
     labels = np.where(geom.centroids[:, 0] < 0, 1, 2).astype(np.int32)
-    return merge_convex_borders(v, geom, labels, adj, f, depth, 5)
+    return merge_convex_borders(v, geom, labels, adj, f, depth, 5, floor)
 
 
 def test_regions_convex_across_their_border_are_joined() -> None:
@@ -28,3 +28,31 @@ def test_regions_meeting_in_a_valley_stay_apart() -> None:
 @pytest.mark.parametrize('kind', ['roof', 'valley'])
 def test_zero_depth_joins_nothing(kind: str) -> None:
     assert set(np.unique(_split(kind, 0.0)).tolist()) == {1, 2}
+
+
+@pytest.mark.parametrize(('floor', 'joined'), [(0.0, False), (0.005, False), (0.02, True)])
+def test_a_valley_shallower_than_the_least_depth_is_joined(floor: float, joined: bool) -> None:
+    # A valley 1 cm deep under the pair's hull (slope 0.02 over half a metre each side): deep
+    # for a join of 0.5 % of the regions' root area, shallower than a floor of 2 cm.
+    merged = _split('valley', depth=0.005, slope=0.02, floor=floor)
+    assert (set(np.unique(merged).tolist()) == {1}) is joined
+
+
+def test_pieces_of_two_caps_join_into_one_region_per_cap() -> None:
+    # Two round caps side by side, each cut into quarters: the quarters of a cap lie on its
+    # hull and join (each border judged again as its regions grow), the caps stay apart.
+    def caps(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        r = np.minimum(np.hypot(x + 0.25, y), np.hypot(x - 0.25, y))
+        return np.sqrt(np.maximum(0.25**2 - r**2, 0.0))
+
+    v, f = height_field(caps, 1.0, 81)
+    geom = face_geometry(v, f)
+    adj = face_adjacency(f, len(v))
+    x, y, z = geom.centroids.T
+    cap = (x > 0).astype(np.int32)
+    quarter = 1 + 4 * cap + 2 * (y > 0) + (np.abs(x) > 0.25)
+    labels = np.where(z > 0.01, quarter, 0).astype(np.int32)
+    merged = merge_convex_borders(v, geom, labels, adj, f, 0.05, 5)
+    assert set(np.unique(merged[(labels > 0) & (cap == 0)]).tolist()) == {1}
+    assert set(np.unique(merged[(labels > 0) & (cap == 1)]).tolist()) == {5}
+    assert not merged[labels == 0].any()

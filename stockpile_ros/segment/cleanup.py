@@ -7,6 +7,7 @@ hulls, undersides dropped, and neighbours joined where the border between them i
 from __future__ import annotations
 
 import contextlib
+import heapq
 
 import numpy as np
 import numpy.typing as npt
@@ -402,6 +403,7 @@ def merge_convex_borders(
     faces: npt.NDArray[np.int64],
     max_depth: float,
     min_edges: int,
+    min_depth: float = 0.0,
 ) -> I32:
     """Join neighbouring regions whose union is convex across their shared border.
 
@@ -409,8 +411,8 @@ def merge_convex_borders(
     valley where two rocks touch lies under it. The test is the median depth of the border
     (midpoints of the centroids of the face pairs across it) under the hull of the union's
     vertices, measured along the border's outward normal, over the square root of the smaller
-    region's area; the shallowest border is joined first and the depths are recomputed after each
-    join.
+    region's area; the shallowest border is joined first, and after each join the borders of the
+    joined region are judged again (the others keep their depth).
 
     Args:
         vertices: Nx3 vertex positions.
@@ -420,13 +422,14 @@ def merge_convex_borders(
         faces: Mx3 triangles.
         max_depth: Borders with a relative depth under this are joined.
         min_edges: Borders of fewer face edges are left alone.
+        min_depth: Least depth taken as a crease [m]: a border shallower is joined whatever
+            the regions' size (the square root of the smaller area is taken as at least
+            ``min_depth / max_depth``).
 
     Returns:
         The merged labels (ids are those of the surviving regions).
 
     """
-    labels = labels.copy()
-    cache: dict[tuple[int, int], float] = {}
     # Each region's hull vertices, found once: the hull of a union is the hull of theirs.
     order, bounds = region_bounds(labels)
     hulls: dict[int, F64] = {}
@@ -447,7 +450,8 @@ def merge_convex_borders(
         return hulls[region]
 
     # The faces either side of every border between two regions, found once: a join only turns
-    # borders into insides, so later rounds look at these edges alone.
+    # borders into insides and two borders into one, so each pair of regions keeps the indices
+    # of its border's edges (in mesh order, which the strided sample of a border follows).
     a, b = labels[adj.i], labels[adj.j]
     edges = np.flatnonzero((a != b) & (a > 0) & (b > 0))
     fi, fj = adj.i[edges], adj.j[edges]
@@ -455,31 +459,63 @@ def merge_convex_borders(
     out = geom.normals[fi] + geom.normals[fj]
     out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
     area = np.bincount(labels, weights=geom.areas)
-    width = int(labels.max()) + 1
-    while True:
-        a, b = labels[fi], labels[fj]
-        inside = a == b
-        if inside.any():
-            a, b, fi, fj, mid, out = (x[~inside] for x in (a, b, fi, fj, mid, out))
-        # One key per pair of regions, in the order of (smaller id, larger id); a stable sort
-        # keeps each border's edges in mesh order.
-        key = np.minimum(a, b).astype(np.int64) * width + np.maximum(a, b)
-        order_k = np.argsort(key, kind='stable')
-        pairs, first, count = np.unique(key[order_k], return_index=True, return_counts=True)
-        best, best_depth = -1, max_depth
-        for k in np.flatnonzero(count >= min_edges):
-            pair = (int(pairs[k] // width), int(pairs[k] % width))
-            if pair not in cache:
-                size = float(np.sqrt(min(area[pair[0]], area[pair[1]])))
-                union = np.concatenate([hull_of(pair[0]), hull_of(pair[1])])
-                sel = order_k[first[k] : first[k] + count[k]]
-                cache[pair] = _border_depth(union, mid[sel], out[sel], size)
-            if cache[pair] < best_depth:
-                best, best_depth = int(k), cache[pair]
-        if best < 0:
-            return labels
-        keep, gone = int(pairs[best] // width), int(pairs[best] % width)
+    lo, hi = np.minimum(a[edges], b[edges]), np.maximum(a[edges], b[edges])
+    key = lo.astype(np.int64) * (int(labels.max()) + 1) + hi
+    by_key = np.argsort(key, kind='stable')
+    split = np.flatnonzero(np.diff(key[by_key])) + 1
+    border: dict[tuple[int, int], npt.NDArray[np.int64]] = {
+        (int(lo[run[0]]), int(hi[run[0]])): run for run in np.split(by_key, split) if len(run)
+    }
+    near: dict[int, set[int]] = {}
+    for r, q in border:
+        near.setdefault(r, set()).add(q)
+        near.setdefault(q, set()).add(r)
+    floor = min_depth / max_depth if max_depth > 0 else 0.0
+    # The shallowest border first, ties to the lowest pair; a pair's depth is found again when
+    # either region grows, and a queued depth that is no longer the pair's is passed over.
+    queue: list[tuple[float, tuple[int, int]]] = []
+    depth: dict[tuple[int, int], float] = {}
+
+    def judge(pair: tuple[int, int]) -> None:
+        sel = border[pair]
+        if len(sel) < min_edges:
+            depth.pop(pair, None)
+            return
+        size = max(float(np.sqrt(min(area[pair[0]], area[pair[1]]))), floor)
+        union = np.concatenate([hull_of(pair[0]), hull_of(pair[1])])
+        depth[pair] = _border_depth(union, mid[sel], out[sel], size)
+        if depth[pair] < max_depth:
+            heapq.heappush(queue, (depth[pair], pair))
+
+    for pair in border:
+        judge(pair)
+    into = np.arange(len(area))
+    while queue:
+        d, pair = heapq.heappop(queue)
+        if depth.get(pair) != d:
+            continue
+        keep, gone = pair
         hulls[keep] = _hull_points(np.concatenate([hull_of(keep), hull_of(gone)]))
-        labels[labels == gone] = keep
         area[keep] += area[gone]
-        cache = {k: d for k, d in cache.items() if keep not in k and gone not in k}
+        into[gone] = keep
+        del border[pair], depth[pair]
+        near[keep].discard(gone)
+        for r in near.pop(gone) - {keep}:
+            old = (min(r, gone), max(r, gone))
+            moved, kept = border.pop(old), border.get((min(r, keep), max(r, keep)))
+            depth.pop(old, None)
+            near[r].discard(gone)
+            near[r].add(keep)
+            near[keep].add(r)
+            border[(min(r, keep), max(r, keep))] = (
+                moved if kept is None else np.sort(np.concatenate([kept, moved]))
+            )
+        for r in near[keep]:
+            judge((min(r, keep), max(r, keep)))
+    # Each joined region to the region it ended in: ids only ever join smaller ids.
+    while True:
+        nxt = into[into]
+        if np.array_equal(nxt, into):
+            break
+        into = nxt
+    return into[labels].astype(np.int32)
