@@ -163,23 +163,23 @@ class SegmentParams:
             pile; 1224 faces, -0.29, on an 11-rock one) were reported as false rocks. Regions
             facing down that border others are left alone: on bench/bench_scale.py's many pile,
             merging those into a neighbour too gave 123 segments for 150 rocks (precision 0.81).
-        hull_split: Before the convex join, split each region at its faces deeper under its
-            own convex hull than the join's ``border_depth`` of the square root of a fragment's
-            area (see ``min_region_share``), where the rest falls into two or more parts of at
-            least a fragment's area each (see ``split_under_hulls``) [off]. One convex rock lies
-            on its hull; two touching rocks that the search ran across (their crease too wide
-            and shallow for the valley test at its radius) have the crease under theirs. At that
-            depth the join keeps a part of that area apart, so the two steps agree. Valley faces
-            neither shape the hull nor hold a part together: handed back, they are the flanks of
-            a crevice and of the rock beyond it, not evidence of a rock (with them, a
+        hull_split: Before the convex join, split each region at its faces deeper under its own
+            convex hull than the join's ``border_depth`` of the square root of a fragment's area
+            (see ``min_region_share``; never under ``depth_min_edges``), where the rest falls into
+            two or more parts of at least a fragment's area each (see ``split_under_hulls``) [off].
+            One convex rock lies on its hull; two touching rocks that the search ran across (their
+            crease too wide and shallow for the valley test at its radius) have the crease under
+            theirs. At that depth the join keeps a part of that area apart, so the two steps agree.
+            Valley faces neither shape the hull nor hold a part together: handed back, they are the
+            flanks of a crevice and of the rock beyond it, not evidence of a rock (with them, a
             neighbour's flank became a part and cut large partly buried riprap; with only the far
             ones left out, one of the five reconstructed piles lost a rock to a cut). On
             bench/bench_yardstick.py's 300-rock beds (seeds 1 and 2, 20 and 30 edges across the
-            smallest b, twelve rows) the mean recall rose from 0.872 to 0.883 and the mean
-            precision from 0.873 to 0.877 (riprap, seed 1, 20 edges: 0.857/0.836 -> 0.882/0.854;
-            cobble, seed 2, 30 edges: 0.876/0.876 -> 0.905/0.886; lower on one row, riprap seed
-            2 at 20 edges, 0.800/0.812 -> 0.800/0.800); the five reconstructed piles and
-            bench/bench_scale.py's six segment as before.
+            smallest b, twelve rows) the mean recall rose from 0.872 to 0.883 and the mean precision
+            from 0.873 to 0.877 (riprap, seed 1, 20 edges: 0.857/0.836 -> 0.882/0.854; cobble, seed
+            2, 30 edges: 0.876/0.876 -> 0.905/0.886; lower on one row, riprap seed 2 at 20 edges,
+            0.800/0.812 -> 0.800/0.800); the five reconstructed piles and bench/bench_scale.py's six
+            segment as before.
         merge_convex: After the fragment merge, join neighbouring regions whose union is convex
             across their shared border (see ``merge_convex_borders``) [off]: on a
             reconstructed mesh, noise stops the search inside single rocks.
@@ -193,6 +193,18 @@ class SegmentParams:
             unchanged, and still joined both split rocks of the demo pile (14 rocks as before).
         border_min_edges: Borders shorter than this many face edges are never joined (a corner
             contact says little about the surface between the regions).
+        depth_min_edges: Least depth the convex join and the hull split take as a crease: a
+            depth under a hull is never compared with less than this [in median edge lengths:
+            a Poisson surface resolves nothing finer than its cell, about an edge, and a border
+            shallower than that lies in its noise]. It binds only where a fragment's join depth
+            (``border_depth`` of a fragment's root area, 0.071 ``min_rock_b``) is under it: a
+            smallest rock under 14 edge lengths, as a cloud's 10 point spacings give (see
+            ``cloud.min_rock_spacings``); the photo route's floor of 20 leaves it idle. On a 1.2
+            M-point survey at 2.8 mm of 220 rocks of 10-35 cm (bench/bench_cloud.py --spacing
+            0.0025; smallest rock 9 edge lengths) 0 reported 794 rocks for 203 found, 528 of the
+            others pieces of found rocks whose borders lay a median 0.93 edge lengths deep (0.087
+            of their root area); 1 reported 593 (1.5: 429, but 1.5 binds at 20 edges too); at
+            7.5 mm (smallest rock 10 edge lengths) 215 for 198 found became 214.
         valley_depth_ratio: Faces whose vertices lie deeper than this under their smoothed
             surroundings are valley faces, kept out of the search and handed back to the regions
             they border afterwards; 0 disables [in units of the valley radius, a crease angle:
@@ -281,6 +293,7 @@ class SegmentParams:
     merge_convex: bool = True
     border_depth: Annotated[float, Range(0.0, 10.0)] = 0.08
     border_min_edges: Annotated[int, Range(0, 100_000_000)] = 5
+    depth_min_edges: Annotated[float, Range(0.0, 100.0)] = 1.0
     valley_depth_ratio: Annotated[float, Range(0.0, 10.0)] = 0.067
     valley_radius_b: Annotated[float, Range(0.001, 1.0)] = 0.075
     valley_min_edges: Annotated[float, Range(0.0, 100.0)] = 4.0

@@ -158,7 +158,8 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
     the floor cuts into its sizes the band ``[b0, sqrt 2 b0)`` holds the most rocks of any band of
     that width, about 2.8 times the next; where the pile's smallest rocks lie above the floor it
     holds pieces of larger rocks and partly seen ones (on the README's reconstructed piles 2-4
-    rocks, no more than the fullest band of true rocks). The warning comes when it holds
+    rocks, no more than the fullest band of true rocks; on a cloud far denser than its rocks need,
+    hundreds: the warning names both causes). The warning comes when it holds
     ``TRUNCATED_RATIO`` times as many as any other band, and ``TRUNCATED_MIN_ROCKS`` or more: the
     pile's gradation is then that of its rocks from about ``b0`` up.
 
@@ -185,10 +186,12 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
         f'{low} of {len(b)} rocks measure b under {np.sqrt(2.0) * b0:.3g} {units}, against at '
         f'most {other} in any other band of sizes a factor 1.41 wide: '
         f'the sizes do not fall off towards {b0:.3g} {units}, the smallest rock this mesh '
-        f'resolves ({b0 / scale.edge:.0f} median edge lengths), so the pile may hold smaller '
-        'rocks, joined to neighbours or left out: its gradation is that of the rocks from about '
-        'that size up. Capture the pile closer or reconstruct it finer to count them, or give '
-        'the smallest rock that matters (segment.min_rock_b, or a class to check) if they do not.'
+        f'resolves ({b0 / scale.edge:.0f} median edge lengths): either the pile holds smaller '
+        'rocks, joined to neighbours or left out, and its gradation is that of the rocks from '
+        'about that size up, or the mesh is so much finer than the rocks that pieces of larger '
+        'rocks count as rocks of that size (a dense cloud). Give the smallest rock that matters '
+        '(segment.min_rock_b, or a class to check); to count smaller ones, capture the pile '
+        'closer or reconstruct it finer.'
     ]
 
 

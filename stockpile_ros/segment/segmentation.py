@@ -279,12 +279,19 @@ def segment_mesh(
         step('undersides', labels)
     if p.hull_split and min_area > 0:
         # At the depth at which the convex join keeps a part of a fragment's area apart.
-        depth = p.border_depth * math.sqrt(min_area)
+        depth = max(p.border_depth * math.sqrt(min_area), p.depth_min_edges * edge)
         labels = split_under_hulls(v, geom, labels, adj, f, depth, min_area, valley)
         step('hull split', labels)
     if p.merge_convex:
         labels = merge_convex_borders(
-            v, geom, labels, search, f, p.border_depth, p.border_min_edges
+            v,
+            geom,
+            labels,
+            search,
+            f,
+            p.border_depth,
+            p.border_min_edges,
+            p.depth_min_edges * edge,
         )
         step('convex join', labels)
     if p.split_depth_ratio > 0 and depths:
