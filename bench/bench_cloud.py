@@ -10,6 +10,7 @@ cached under ``--cache``.
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--cache DIR]
+        [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -72,7 +73,10 @@ def run() -> None:
     # 7.5 mm: 135k points on this pile (1 cm: 77k).
     parser.add_argument('--spacing', type=float, default=0.0075)
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
+    parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                        help="passed to stockpile segment's --set")  # fmt: skip
     args = parser.parse_args()
+    overrides = [flag for item in args.set for flag in ('--set', item)]
     folder = args.cache / f'{args.rocks}_{args.spacing:g}'
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -85,7 +89,7 @@ def run() -> None:
         out = folder / f'result_{path.suffix[1:]}'
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.perf_counter()
-        assert main(['segment', str(path), '--out', str(out), *flags]) == 0
+        assert main(['segment', str(path), '--out', str(out), *flags, *overrides]) == 0
         total = time.perf_counter() - t0
         t1 = time.perf_counter()
         cloud = read_cloud(path)
