@@ -395,6 +395,10 @@ def _border_depth(union: F64, border: F64, outward: F64, size: float) -> float:
     return float(np.median(reach.min(axis=1))) / size
 
 
+def _pair(a: int, b: int) -> tuple[int, int]:
+    return (a, b) if a < b else (b, a)
+
+
 def merge_convex_borders(
     vertices: F64,
     geom: FaceGeometry,
@@ -501,17 +505,15 @@ def merge_convex_borders(
         del border[pair], depth[pair]
         near[keep].discard(gone)
         for r in near.pop(gone) - {keep}:
-            old = (min(r, gone), max(r, gone))
-            moved, kept = border.pop(old), border.get((min(r, keep), max(r, keep)))
+            old, grown = _pair(r, gone), _pair(r, keep)
+            moved, kept = border.pop(old), border.get(grown)
             depth.pop(old, None)
             near[r].discard(gone)
             near[r].add(keep)
             near[keep].add(r)
-            border[(min(r, keep), max(r, keep))] = (
-                moved if kept is None else np.sort(np.concatenate([kept, moved]))
-            )
+            border[grown] = moved if kept is None else np.sort(np.concatenate([kept, moved]))
         for r in near[keep]:
-            judge((min(r, keep), max(r, keep)))
+            judge(_pair(r, keep))
     # Each joined region to the region it ended in: ids only ever join smaller ids.
     while True:
         nxt = into[into]
