@@ -19,6 +19,8 @@ fails Eq. 2 at the default threshold is 0.25 (the README's five reconstructed pi
 matching has them: a plane fit to the ``--normal-neighbours`` nearest noisy points (the cloud
 route's ``cloud.neighbours`` by default), turned towards the ray that found each point (0: the
 true normals, which round no edge).
+With ``--rounding`` every rock's edges are worn round as a river's (``random_rock``: radians of
+the smoothing of its radius; 0.3 for river cobbles; the same sizes, shapes and places).
 With ``--wave`` the bed lies on uneven ground (``drape``: a wave of that amplitude and
 ``--wave-length``, both in units of the largest b; 0: flat). Then the product's
 ``segment_and_measure`` with the smallest and largest rocks set to the material's smallest and
@@ -43,7 +45,7 @@ labels). The beds and their meshed surfaces are kept under ``--cache`` (a
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
-        [--materials aggregate cobble riprap] [--noise 0.6] [--relief 0.3]
+        [--materials aggregate cobble riprap] [--rounding 0] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
         [--steps] [--set FIELD=VALUE ...]
 """
@@ -80,6 +82,7 @@ from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
 from stockpile_ros.tools.evaluation.match import MatchOptions  # noqa: E402
 from stockpile_ros.tools.sim import bed as sim_bed  # noqa: E402
 from stockpile_ros.tools.sim import pile as sim_pile  # noqa: E402
+from stockpile_ros.tools.sim import rocks as sim_rocks  # noqa: E402
 from stockpile_ros.tools.sim.bed import (  # noqa: E402
     MATERIALS,
     BedConfig,
@@ -102,11 +105,16 @@ def cached(path: Path, make: Callable[[], Any]) -> Any:
     return made
 
 
-def bed(material: str, rocks: int, seed: int, cache: Path):
+#: The simulator's source: a cache made by other code is made again.
+SOURCE = b''.join(Path(m.__file__).read_bytes() for m in (sim_bed, sim_pile, sim_rocks))
+
+
+def bed(material: str, rocks: int, seed: int, rounding: float, cache: Path):
     lo, hi = MATERIALS[material]
-    cfg = BedConfig(rocks=rocks, gradation=Gradation((lo, hi), (0.0, 100.0)))
+    cfg = BedConfig(rocks=rocks, gradation=Gradation((lo, hi), (0.0, 100.0)), rounding=rounding)
+    key = hashlib.sha1(repr(cfg).encode() + SOURCE).hexdigest()[:16]
     return cached(
-        cache / f'{material}-{rocks}-{seed}.pickle',
+        cache / f'{material}-{rocks}-{seed}-{key}.pickle',
         lambda: build_bed(np.random.default_rng(seed), cfg),
     )
 
@@ -119,10 +127,10 @@ def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> 
     a changed simulator meshes again.
     """
     lo, hi = MATERIALS[material]
-    source = b''.join(Path(m.__file__).read_bytes() for m in (sim_bed, sim_pile))
-    survey = ('rocks', 'seed', 'noise', 'relief', 'relief_length', 'normal_neighbours', 'wave')
-    settings = (material, across, args.wave_length, *(getattr(args, k) for k in survey))
-    key = hashlib.sha1(repr(settings).encode() + source).hexdigest()[:16]
+    drawn = ('rocks', 'seed', 'rounding')
+    survey = ('noise', 'relief', 'relief_length', 'normal_neighbours', 'wave')
+    settings = (material, across, args.wave_length, *(getattr(args, k) for k in drawn + survey))
+    key = hashlib.sha1(repr(settings).encode() + SOURCE).hexdigest()[:16]
 
     def make() -> BedSurface:
         surface = bed_surface(
@@ -145,6 +153,9 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--edges', type=float, nargs='+', default=[4.0, 8.0, 12.0, 20.0, 30.0])
     parser.add_argument('--materials', nargs='+', default=list(MATERIALS), choices=list(MATERIALS))
+    parser.add_argument(
+        '--rounding', type=float, default=0.0, help="rocks' edges worn round [radians; 0.3: river]"
+    )
     parser.add_argument('--noise', type=float, default=0.6, help='point noise [Poisson cells]')
     parser.add_argument('--relief', type=float, default=0.3, help='smooth relief [cells]')
     parser.add_argument('--relief-length', type=float, default=3.0, help='its length [cells]')
@@ -165,14 +176,15 @@ def main() -> None:
     args.cache.mkdir(parents=True, exist_ok=True)
     overrides = {k: ast.literal_eval(v) for k, v in (s.split('=', 1) for s in args.set)}
     normals = f'from {args.normal_neighbours} points' if args.normal_neighbours else 'true'
-    print(f'{args.rocks} rocks per bed, seed {args.seed}, noise {args.noise} cells, relief '
+    print(f'{args.rocks} rocks per bed, seed {args.seed}, rounding {args.rounding} rad, '
+          f'noise {args.noise} cells, relief '
           f'{args.relief} cells over {args.relief_length}; normals {normals}; ground wave '
           f'{args.wave} largest b over {args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
           'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor')  # fmt: skip
     for material in args.materials:
-        placed = bed(material, args.rocks, args.seed, args.cache)
+        placed = bed(material, args.rocks, args.seed, args.rounding, args.cache)
         lo, hi = MATERIALS[material]
         cost = []
         for across in args.edges:

@@ -83,6 +83,38 @@ def test_random_rock_is_closed_and_has_the_requested_b(shape: str) -> None:
         assert a / b > 1.6
 
 
+def _sharpest_bend(rock: RockMesh) -> float:
+    """The 99th percentile of the angle between neighbouring faces' normals [degrees]."""
+    v, f = rock.vertices, rock.faces
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    face = np.tile(np.arange(len(f)), 3)
+    key = np.minimum(edges[:, 0], edges[:, 1]) * len(v) + np.maximum(edges[:, 0], edges[:, 1])
+    order = np.argsort(key)
+    key, face = key[order], face[order]
+    pair = key[1:] == key[:-1]
+    cos = np.einsum('ij,ij->i', n[face[:-1][pair]], n[face[1:][pair]])
+    return float(np.degrees(np.arccos(np.clip(np.percentile(cos, 1), -1.0, 1.0))))
+
+
+def test_rounding_wears_the_edges_and_draws_nothing() -> None:
+    sharp, worn = [], []
+    for seed in range(6):
+        rng_a, rng_b = np.random.default_rng(seed), np.random.default_rng(seed)
+        angular = random_rock(rng_a, 0.2, 'equant', subdivisions=3)
+        rounded = random_rock(rng_b, 0.2, 'equant', subdivisions=3, rounding=0.3)
+        # The same draws: a bed with rounded rocks has the same sizes, shapes and places.
+        assert rng_a.random() == rng_b.random()
+        assert _closed_and_oriented(rounded)
+        assert principal_dimensions(rounded)[1] == pytest.approx(0.2)
+        sharp.append(_sharpest_bend(angular))
+        worn.append(_sharpest_bend(rounded))
+    # The hull's edges bend 40-60 degrees across one face edge; worn round, under half of it.
+    assert min(sharp) > 35.0
+    assert max(w / s for w, s in zip(worn, sharp, strict=True)) < 0.5
+
+
 def test_gradation_parsing_and_sampling_by_mass() -> None:
     g = parse_gradation('D15=0.1,D50=0.15,D85=0.22')
     assert g.percent_passing[0] == 0 and g.percent_passing[-1] == 100

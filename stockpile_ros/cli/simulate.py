@@ -46,6 +46,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help='share of elongated rocks',
     )
     g.add_argument(
+        '--rounding',
+        type=float,
+        default=d_pile.rounding,
+        help="how far the rocks' edges are worn round [radians; 0: angular, 0.3: river cobbles]",
+    )
+    g.add_argument(
         '--spread',
         type=float,
         default=d_pile.spread,
@@ -123,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
         flat_fraction=args.flat,
         elongated_fraction=args.elongated,
         spread=args.spread,
+        rounding=args.rounding,
     )
     first, second = args.camera_height, args.camera_height2
     heights = (first,) if args.heights == 1 else (first, second)

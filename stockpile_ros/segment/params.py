@@ -48,9 +48,10 @@ EDGE_SAMPLES = 65536
 RESOLVABLE_EDGES = 4.0
 
 #: Median edge lengths across the smallest rock of interest from which the segmentation finds
-#: rocks as it should: on bench/bench_yardstick.py's 300-rock beds (aggregate, cobble, riprap)
-#: recall rose from 0.81-0.90 at 20 to 0.89-0.93 at 30, precision from 0.88-0.89 to 0.92-0.95.
-SHARP_EDGES = 30.0
+#: rocks as it should: on bench/bench_yardstick.py's six 300-rock beds of angular rocks
+#: (aggregate, cobble, riprap; seeds 1 and 2) recall was 0.80-0.88 at 20, 0.85-0.94 at 30 and
+#: 0.92-0.94 at 40, precision 0.80-0.88, 0.88-0.92 and 0.89-0.95.
+SHARP_EDGES = 40.0
 
 
 #: Rings of faces a front crosses per median edge length of distance: across edge-neighbouring

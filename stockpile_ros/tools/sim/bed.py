@@ -8,7 +8,8 @@ segmentation is the rocks' shapes, how they touch, and how many mesh edges lie a
 the absolute size only scales everything, so each material class is a gradation, and the mesh
 resolution is given in edges across the smallest rock's b.
 
-Rocks (the simulator's angular rock meshes, with flat and elongated shares) are dropped one at a
+Rocks (the simulator's angular rock meshes, with flat and elongated shares, or the same worn round
+as a river's) are dropped one at a
 time at random points over a square, each onto the heightfield of the ground and the rocks
 already there (see :mod:`.pile`); of a few drop points the lowest resting place wins (rocks settle
 into hollows), and each rock then sinks a random share of its height into what lies under it
@@ -73,6 +74,8 @@ class BedConfig:
         flat_fraction: Share of flat rocks (c about 0.38 b).
         elongated_fraction: Share of elongated rocks (a about 2.3 b).
         roughness: Radial roughness amplitude (share of the radius).
+        rounding: How far the rocks' edges are worn round (``random_rock``) [radians; 0: angular
+            quarry rock, 0.3: river cobbles].
         subdivisions: Icosphere subdivisions per rock (3: 1280 faces).
         cover: Summed plan area of the rocks over the area of the square they fall on (above 1:
             more than one layer; on beds of 110 rocks of 0.1-0.3 m the ground showed on 10 % of
@@ -89,6 +92,7 @@ class BedConfig:
     flat_fraction: float = 0.2
     elongated_fraction: float = 0.2
     roughness: float = 0.025
+    rounding: float = 0.0
     subdivisions: int = 3
     cover: float = 4.0
     cell_b: float = 0.08
@@ -118,7 +122,7 @@ def build_bed(rng: np.random.Generator, cfg: BedConfig) -> list[PlacedRock]:
     field_ = _Heightfield(half + 2.0 * float(sizes.max()), cell)
     placed: list[PlacedRock] = []
     for k, (b, shape) in enumerate(zip(sizes, shapes, strict=True)):
-        rock = random_rock(rng, float(b), shape, cfg.roughness, cfg.subdivisions)
+        rock = random_rock(rng, float(b), shape, cfg.roughness, cfg.subdivisions, cfg.rounding)
         mesh = rock.transformed(_resting_rotation(rng), np.zeros(3))
         bottom, top, idx = _under_and_over(mesh, cell)
         best: tuple[float, npt.NDArray[np.int64]] | None = None

@@ -117,6 +117,8 @@ class PileConfig:
         spread: Standard deviation of drop points around the pile centre, in units of the radius of
             one layer of the same rocks (smaller piles higher).
         roughness: Radial roughness amplitude (fraction of the radius).
+        rounding: How far the rocks' edges are worn round (``random_rock``) [radians; 0: angular
+            quarry rock, 0.3: river cobbles].
         subdivisions: Icosphere subdivisions per rock.
         cell: Heightfield cell size [m].
         compactness: Height [m] a rock would rather climb than rest 1 m farther from the centre.
@@ -129,6 +131,7 @@ class PileConfig:
     elongated_fraction: float = 0.15
     spread: float = 0.3
     roughness: float = 0.025
+    rounding: float = 0.0
     subdivisions: int = 4
     cell: float = 0.004
     compactness: float = 0.6
@@ -279,7 +282,7 @@ def build_pile(rng: np.random.Generator, cfg: PileConfig, candidates: int = 24) 
     sizes = cfg.gradation.sample(rng, cfg.rocks)
     shapes = _shapes(rng, cfg)
     meshes = [
-        random_rock(rng, float(b), s, cfg.roughness, cfg.subdivisions)
+        random_rock(rng, float(b), s, cfg.roughness, cfg.subdivisions, cfg.rounding)
         for b, s in zip(sizes, shapes, strict=True)
     ]
     ab = [float(b) ** 2 * SHAPES[s][0] for b, s in zip(sizes, shapes, strict=True)]

@@ -210,6 +210,7 @@ def _scene_dict(cfg: SimulationConfig, scene: Scene) -> dict[str, Any]:
         'elongated_fraction': pile.elongated_fraction,
         'spread': pile.spread,
         'roughness': pile.roughness,
+        'rounding': pile.rounding,
         'subdivisions': pile.subdivisions,
         'settling_cell': pile.cell,
         'dimension_method': DIMENSION_METHOD,

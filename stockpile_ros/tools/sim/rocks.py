@@ -1,9 +1,11 @@
-"""Angular, irregular rock meshes and their exact geometric properties.
+"""Angular or rounded, irregular rock meshes and their exact geometric properties.
 
 A rock is the convex hull of a few random points inside an ellipsoid, sampled radially from its
 centroid by the vertices of a subdivided icosahedron (so the triangulation is even and the mesh is
-closed and star-shaped), then roughened by a small radial displacement. Star-shaped radial sampling
-can never fold the surface over itself, so volume and area from the mesh are exact.
+closed and star-shaped), its edges and corners optionally worn round (the radius averaged over
+nearby directions, as a river rounds a pebble), then roughened by a small radial displacement.
+Star-shaped radial sampling can never fold the surface over itself, so volume and area from the
+mesh are exact.
 """
 
 from __future__ import annotations
@@ -156,14 +158,24 @@ def _hull_radius(
     return np.asarray(t.min(axis=1))
 
 
+def _worn(
+    dirs: npt.NDArray[np.float64], radius: npt.NDArray[np.float64], sigma: float
+) -> npt.NDArray[np.float64]:
+    """Average the radial function over directions within about ``sigma`` radians."""
+    angle = np.arccos(np.clip(dirs @ dirs.T, -1.0, 1.0))
+    weight = np.exp(-0.5 * (angle / sigma) ** 2)
+    return np.asarray(weight @ radius / weight.sum(axis=1))
+
+
 def random_rock(
     rng: np.random.Generator,
     b: float,
     shape: str = 'equant',
     roughness: float = 0.025,
     subdivisions: int = 4,
+    rounding: float = 0.0,
 ) -> RockMesh:
-    """Make one angular rock whose principal intermediate dimension is exactly ``b``.
+    """Make one rock whose principal intermediate dimension is exactly ``b``.
 
     Args:
         rng: Random generator (the only source of randomness).
@@ -171,6 +183,11 @@ def random_rock(
         shape: Key of :data:`SHAPES`.
         roughness: Amplitude of the radial surface roughness, as a fraction of the radius.
         subdivisions: Icosphere subdivisions (4: 5120 faces).
+        rounding: How far the hull's edges and corners are worn round: the radius is averaged
+            over directions with Gaussian weights of this standard deviation [radians; 0: the
+            hull's sharp edges, angular quarry rock; 0.3 rounds every edge over about a third of
+            the rock's half-width, as on river cobbles]. Draws nothing from ``rng``, so a bed with
+            and without it has the same rocks in the same places but for their shape.
 
     Returns:
         The rock, centred on its centroid, long axis roughly along x and short axis along z.
@@ -188,6 +205,8 @@ def random_rock(
     pts = np.concatenate([pts, axes]) * (ratios / 2)
     dirs, faces = icosphere(subdivisions)
     radius = _hull_radius(pts, dirs)
+    if rounding > 0:
+        radius = _worn(dirs, radius, rounding)
     freq = 4.0 / float(ratios.min())
     offset = rng.uniform(0, 1000, size=3)
     bumps = value_noise(dirs * ratios / 2 * freq + offset, octaves=3)
