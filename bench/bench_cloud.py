@@ -5,12 +5,18 @@ cm sampled as a terrestrial scanner would, about 135k points at 7.5 mm, 2 mm ran
 degrees and offset as georeferenced coordinates are) is written as binary PLY, ASCII XYZ and LAZ;
 each goes through ``stockpile segment FILE --units m`` (LAZ without --units: survey units) in this
 process. Printed per file: seconds from file to result folder, the reading and meshing part of it
-(measured again on its own), rocks found against the truth and the median b error. The survey is
+(measured again on its own), rocks found against the truth, the median b error and the D50 error
+(by mass, against every true rock). The survey is
 cached under ``--cache``.
 
+With ``--bed`` the rocks cover the ground as a gravel bar's do (``stockpile_ros.tools.sim.bed``),
+with ``--rounding`` their edges are worn round as a river's, ``--gradation`` sets their b: a
+gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m) is ``--bed --rounding 0.3
+--gradation 0.05:0.5 --spacing 0.01``.
+
 Usage:
-    .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--cache DIR]
-        [--set NAME=VALUE ...]
+    .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
+        [--bed] [--rounding R] [--cache DIR] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -34,11 +40,12 @@ import open3d as o3d  # noqa: E402
 from stockpile_ros.cli import main  # noqa: E402
 from stockpile_ros.cloud import CloudOptions, mesh_cloud, read_cloud  # noqa: E402
 from stockpile_ros.recon.surface import PoissonOptions  # noqa: E402
+from stockpile_ros.tools.sim.bed import BedConfig  # noqa: E402
 from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation  # noqa: E402
 from stockpile_ros.tools.sim.survey import Survey, score_survey, simulate_survey  # noqa: E402
 
 
-def survey(folder: Path, rocks: int, spacing: float) -> Survey:
+def survey(folder: Path, args: argparse.Namespace) -> Survey:
     """Return the cached survey, or simulate it (its truth in ``folder/truth``)."""
     path = folder / 'survey.pickle'
     if path.exists():
@@ -46,8 +53,13 @@ def survey(folder: Path, rocks: int, spacing: float) -> Survey:
         with contextlib.suppress(ModuleNotFoundError, AttributeError):
             loaded: Survey = pickle.loads(path.read_bytes())
             return loaded
-    pile = PileConfig(rocks=rocks, gradation=parse_gradation('0.1:0.35'))
-    made = simulate_survey(folder / 'truth', pile, seed=11, spacing=spacing, noise=0.002)
+    grading = parse_gradation(args.gradation)
+    scene: PileConfig | BedConfig
+    if args.bed:
+        scene = BedConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
+    else:
+        scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
+    made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002)
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -72,19 +84,25 @@ def run() -> None:
     parser.add_argument('--rocks', type=int, default=220)
     # 7.5 mm: 135k points on this pile (1 cm: 77k).
     parser.add_argument('--spacing', type=float, default=0.0075)
+    parser.add_argument('--gradation', default='0.1:0.35', help='b of the rocks [m]')
+    parser.add_argument('--rounding', type=float, default=0.0, help='edges worn round [rad]')
+    parser.add_argument('--bed', action='store_true', help='a bed covering the ground')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                         help="passed to stockpile segment's --set")  # fmt: skip
     args = parser.parse_args()
     overrides = [flag for item in args.set for flag in ('--set', item)]
     folder = args.cache / f'{args.rocks}_{args.spacing:g}'
+    if args.bed or args.rounding or args.gradation != '0.1:0.35':
+        kind = 'bed' if args.bed else 'pile'
+        folder = folder.with_name(f'{folder.name}_{kind}_{args.gradation}_{args.rounding:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    s = survey(folder, args.rocks, args.spacing)
+    s = survey(folder, args)
     print(f'survey: {len(s.points)} points, {len(s.truth["rocks"])} rocks '
           f'({time.perf_counter() - start:.1f} s to simulate or load)')  # fmt: skip
     print(f'{"file":<12} {"MB":>6} {"to report s":>12} {"read+mesh s":>12} {"rocks":>6} '
-          f'{"recall":>7} {"precision":>9} {"|b| err %":>9}')  # fmt: skip
+          f'{"recall":>7} {"precision":>9} {"|b| err %":>9} {"D50 err %":>9}')  # fmt: skip
     for path, flags in write_files(s, folder):
         out = folder / f'result_{path.suffix[1:]}'
         shutil.rmtree(out, ignore_errors=True)
@@ -98,9 +116,11 @@ def run() -> None:
         scores = score_survey(out, folder / 'truth', s)
         d = scores['detection']
         b = scores['sizes']['summary_visible']['b']['median_abs_pct']
+        d50 = 100.0 * scores['gradation']['d50_error']
         size = path.stat().st_size / 1e6
+        found = f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f} {d50:+9.1f}'
         print(f'{path.name:<12} {size:6.1f} {total:12.1f} {meshing:12.1f} {d["result_rocks"]:6d} '
-              f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f}')  # fmt: skip
+              f'{found}')  # fmt: skip
 
 
 if __name__ == '__main__':

@@ -1,6 +1,7 @@
-"""A simulated survey cloud of a pile (terrestrial or phone LiDAR), with its truth folder.
+"""A simulated survey cloud of a pile or a bed (terrestrial or phone LiDAR), with its truth folder.
 
-The pile is the simulator's (:func:`~.pile.build_pile`); the cloud samples its visible union
+The pile is the simulator's (:func:`~.pile.build_pile`), or a bed of rocks covering the ground
+as a gravel bar's do (:func:`~.bed.build_bed`); the cloud samples its visible union
 surface (:func:`~stockpile_ros.tools.synthetic.sample_scene`) as seen from a ring of scanner
 positions and one overhead, uniformly in area at a chosen spacing, with Gaussian range noise,
 then moves it into a survey frame (tilted, far from the origin as georeferenced coordinates are)
@@ -28,6 +29,7 @@ from ...ros.outputs import pointcloud2
 from ...segment.gradation import gradation
 from ..evaluation import EvaluationError, evaluate_sides, load_result, load_truth
 from ..synthetic import SyntheticPile, sample_scene
+from .bed import BedConfig, build_bed
 from .pile import PileConfig, build_pile
 from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
 
@@ -65,7 +67,7 @@ class Survey:
 
 def simulate_survey(
     out: str | Path,
-    pile: PileConfig,
+    pile: PileConfig | BedConfig,
     *,
     seed: int = 0,
     spacing: float = 0.01,
@@ -77,7 +79,7 @@ def simulate_survey(
 
     Args:
         out: Truth folder (created).
-        pile: The pile.
+        pile: The pile, or the bed.
         seed: Random seed of the pile, the samples and the noise.
         spacing: Median distance between neighbouring points, about [m].
         noise: Standard deviation of the range noise, along each point's normal [m].
@@ -86,7 +88,7 @@ def simulate_survey(
 
     """
     rng = np.random.default_rng(seed)
-    rocks = build_pile(rng, pile)
+    rocks = build_bed(rng, pile) if isinstance(pile, BedConfig) else build_pile(rng, pile)
     reach = max(float(np.abs(r.mesh.vertices[:, :2]).max()) for r in rocks)
     ground_half = reach + 0.5
     scene = scene_mesh(rocks, ground_half)
@@ -114,7 +116,8 @@ def simulate_survey(
         'frame_id': 'pile',
         'seed': seed,
         'scene': {'survey': {'spacing': spacing, 'noise': noise, 'tilt_deg': tilt_deg,
-                             'rocks': pile.rocks, 'gradation': pile.gradation.as_dict()}},
+                             'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
+                             'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
         'target': None,
         'specific_gravity': SPECIFIC_GRAVITY,
