@@ -21,7 +21,9 @@ __all__ = [
     'BORDER_SAMPLES',
     'HULL_SAMPLES',
     'drop_facing_down',
+    'drop_unanchored',
     'hand_back',
+    'label_parts',
     'merge_convex_borders',
     'merge_fragments',
     'region_bounds',
@@ -173,6 +175,43 @@ def merge_fragments(
         labels = target[labels].astype(np.int32)
 
 
+def _parts(
+    adj: FaceAdjacency, faces: npt.NDArray[np.bool_], along: npt.NDArray[np.bool_]
+) -> tuple[int, npt.NDArray[np.int64]]:
+    """Find the connected parts of the ``faces`` over the edges ``along`` marks, in face order."""
+    keep = along & faces[adj.i] & faces[adj.j]
+    index = np.cumsum(faces) - 1
+    count = int(faces.sum())
+    # The graph of those faces alone: the parts are numbered by their first face either way.
+    graph = sp.csr_matrix(
+        (np.ones(int(keep.sum())), (index[adj.i[keep]], index[adj.j[keep]])), shape=(count, count)
+    )
+    n, part = connected_components(graph, directed=False)
+    return int(n), np.asarray(part, dtype=np.int64)
+
+
+def label_parts(labels: I32, adj: FaceAdjacency, free: npt.NDArray[np.bool_]) -> I32:
+    """Give each connected part of the unlabelled ``free`` faces an id of its own.
+
+    Returns:
+        The labels, the parts numbered after every existing id.
+
+    """
+    free = free & (labels == 0)
+    if not free.any():
+        return labels
+    _, part = _parts(adj, free, np.ones(len(adj.i), dtype=bool))
+    out: I32 = labels.copy()
+    out[free] = int(labels.max()) + 1 + part
+    return out
+
+
+def drop_unanchored(labels: I32, loose: npt.NDArray[np.bool_]) -> I32:
+    """Give label 0 to every region all of whose faces are ``loose``."""
+    anchored = np.bincount(labels, weights=(~loose).astype(np.float64)) > 0
+    return np.where(anchored[labels], labels, 0).astype(np.int32)
+
+
 def split_into_parts(
     labels: I32, adj: FaceAdjacency, areas: F64, solid: npt.NDArray[np.bool_], least: F64
 ) -> I32:
@@ -197,16 +236,10 @@ def split_into_parts(
     m = len(labels)
     same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
     solid = solid & (labels > 0)
-    keep = same & solid[adj.i] & solid[adj.j]
     faces = np.flatnonzero(solid)
     if not len(faces):
         return labels
-    # The graph of the solid faces alone: the parts are numbered by their first face either way.
-    index = np.zeros(m, dtype=np.int64)
-    index[faces] = np.arange(len(faces))
-    i, j = index[adj.i[keep]], index[adj.j[keep]]
-    graph = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(len(faces),) * 2)
-    n, part = connected_components(graph, directed=False)
+    n, part = _parts(adj, solid, same)
     owner = np.zeros(n, dtype=np.int64)
     owner[part] = labels[faces]
     big = np.bincount(part, weights=areas[faces], minlength=n) >= least[owner]

@@ -142,7 +142,7 @@ def _resolution_warnings(seg: Segmentation) -> list[str]:
     return [
         f'The smallest rock of interest ({scale.source}) has b = {scale.requested:.3f} m, '
         f'{across:.0f} median edge lengths of the mesh: on simulated beds of 300 angular rocks, '
-        f'recall was 0.80-0.88 at 20 edge lengths, 0.85-0.94 at 30 and 0.92-0.94 at '
+        f'recall was 0.81-0.89 at 20 edge lengths, 0.85-0.94 at 30 and 0.93-0.96 at '
         f'{SHARP_EDGES:g}, the lost rocks joined to a neighbour. For a check, capture the '
         'pile closer or reconstruct it finer, to edges of '
         f'{scale.requested / SHARP_EDGES:.3g} m or less.'

@@ -27,9 +27,11 @@ Two presets of :class:`SegmentParams`:
   radius, see ``hull_split``); then neighbouring regions whose union stays convex across
   their shared border are joined (on reconstructed piles, noise stops the search inside single
   rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
-  ``merge_convex_borders``). A region that a wider valley cuts into two or more large parts can
-  be split into them last (``split_depth_ratio``, see ``split_at_valleys``): off by default, as
-  the neck split parts the rocks it was for and it cut single rough rocks.
+  ``merge_convex_borders``), the fragments left out before taking part and left out again
+  where joined to nothing (see ``convex_fragments``). A region that a wider valley cuts into two
+  or more large parts can be split into them last (``split_depth_ratio``, see
+  ``split_at_valleys``): off by default, as the neck split parts the rocks it was for and it cut
+  single rough rocks.
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
@@ -60,7 +62,9 @@ import numpy.typing as npt
 from .adjacency import FaceAdjacency, FaceGeometry, face_adjacency, face_geometry
 from .cleanup import (
     drop_facing_down,
+    drop_unanchored,
     hand_back,
+    label_parts,
     merge_convex_borders,
     merge_fragments,
     split_at_necks,
@@ -242,7 +246,9 @@ def segment_mesh(
     step('search', labels)
     raw = int(labels.max()) if m else 0
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
+    loose = np.zeros(m, dtype=bool)
     if min_area > 0:
+        searched = labels > 0
         labels = merge_fragments(
             labels,
             search,
@@ -253,6 +259,7 @@ def segment_mesh(
             adj.neighbour_count(),
         )
         step('fragments', labels)
+        loose = searched & (labels == 0)
         if p.neck_radii > 0:
             rings = math.ceil(RINGS_PER_EDGE * p.neck_radii * valley_radius / edge)
             labels = split_at_necks(labels, adj, geom.areas, rings, min_area)
@@ -283,6 +290,11 @@ def segment_mesh(
         labels = split_under_hulls(v, geom, labels, adj, f, depth, min_area, valley)
         step('hull split', labels)
     if p.merge_convex:
+        if p.convex_fragments:
+            # Each fragment the merge left out is a region again for the join, and left out
+            # again unless joined: a piece of a larger rock, cut off by the search along noise,
+            # is convex with it; a small rock wedged between larger ones is not.
+            labels = label_parts(labels, adj, loose)
         labels = merge_convex_borders(
             v,
             geom,
@@ -293,6 +305,8 @@ def segment_mesh(
             p.border_min_edges,
             p.depth_min_edges * edge,
         )
+        if p.convex_fragments:
+            labels = drop_unanchored(labels, loose)
         step('convex join', labels)
     if p.split_depth_ratio > 0 and depths:
         deep = depths[-1] > p.split_depth_ratio * split_radius
