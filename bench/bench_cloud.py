@@ -11,8 +11,8 @@ cached under ``--cache``.
 
 With ``--bed`` the rocks cover the ground as a gravel bar's do (``stockpile_ros.tools.sim.bed``),
 with ``--rounding`` their edges are worn round as a river's, ``--gradation`` sets their b: a
-gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m) is ``--bed --rounding 0.3
---gradation 0.05:0.5 --spacing 0.01``.
+gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m, a few hundred grains) is
+``--bed --rounding 0.3 --gradation 0.1:0.4 --rocks 400 --spacing 0.01``.
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
