@@ -22,6 +22,7 @@ from stockpile_ros.cloud import (
     poisson_depth,
     trend_up,
 )
+from stockpile_ros.cloud.noise import point_noise
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.recon.surface import PoissonOptions
 from stockpile_ros.result import Report
@@ -66,6 +67,41 @@ def test_spacing_and_depth_move_with_the_data() -> None:
     assert poisson_depth(5000.0, 10.0, 1.0, 14) == 10  # the same cloud in millimetres
     assert poisson_depth(5.0, 0.01, 2.0, 14) == 9
     assert poisson_depth(5.0, 0.01, 1.0, 8) == 8
+
+
+def test_noise_is_the_scatter_about_the_surface_not_its_shape() -> None:
+    rng = np.random.default_rng(5)
+    bed = _grain_bed(n=60, half=0.8, seed=5)  # caps of 8-20 cm at 1 cm: curvature and creases
+    assert point_noise(bed) < 0.0003
+    for sigma in (0.001, 0.003):
+        noisy = bed + rng.normal(0.0, sigma, bed.shape)
+        assert point_noise(noisy) == pytest.approx(sigma, rel=0.15)
+        # Survey coordinates far from the origin and millimetres: the same scatter.
+        far = noisy + np.array([5.0e5, 5.0e6, 300.0])
+        assert point_noise(far) == pytest.approx(point_noise(noisy))
+        assert point_noise(noisy * 1000.0) == pytest.approx(1000.0 * point_noise(noisy))
+
+
+def test_a_cloud_denser_than_its_noise_is_meshed_and_cut_as_its_noise_allows() -> None:
+    bed = _grain_bed(n=40, half=0.6, seed=2)
+    clean = _cloud(bed + np.random.default_rng(0).normal(0.0, 0.001, bed.shape))
+    noisy = _cloud(bed + np.random.default_rng(0).normal(0.0, 0.006, bed.shape))
+    opts, poisson = CloudOptions(), PoissonOptions()
+    _, fine = mesh_cloud(clean, opts, poisson, 1.0, 'given')
+    _, coarse = mesh_cloud(noisy, opts, poisson, 1.0, 'given')
+    # 1 mm at 1 cm: the spacing is the resolution. 6 mm: three of them, 1.8 spacings.
+    assert fine.cloud['resolution'] == fine.cloud['spacing']
+    assert not any('scatter' in w for w in fine.cloud['warnings'])
+    assert coarse.cloud['noise'] == pytest.approx(0.006, rel=0.15)
+    assert coarse.cloud['resolution'] == pytest.approx(3.0 * coarse.cloud['noise'])
+    assert coarse.cloud['resolution'] > 1.5 * coarse.cloud['spacing']
+    assert any('scatter' in w for w in coarse.cloud['warnings'])
+    assert coarse.poisson['depth'] < fine.poisson['depth']
+    rock = coarse.cloud['min_rock_edges'] * coarse.cloud['median_edge']
+    assert rock == pytest.approx(10.0 * coarse.cloud['resolution'])
+    _, spacing_only = mesh_cloud(noisy, CloudOptions(noise_sigmas=0.0), poisson, 1.0, 'given')
+    assert spacing_only.cloud['resolution'] == spacing_only.cloud['spacing']
+    assert spacing_only.poisson['depth'] == fine.poisson['depth']
 
 
 @pytest.mark.parametrize('flip', [False, True])

@@ -47,9 +47,10 @@ without faces, OBJ vertices, LAS/LAZ, XYZ/CSV/TXT columns x y z [nx ny nz] [r g 
 optional header), with or without normals and colours. A cloud is levelled (up from --up, else
 the normal of its robust trend plane: no bare ground is needed), its normals estimated where
 missing and turned to the side the cloud is seen from, and Poisson-meshed at a depth whose
-finest cell is about the point spacing (cloud.* parameters); its smallest rock is
-cloud.min_rock_spacings point spacings (in place of the 20-edge floor below, which is what a
-mesh from photos resolves). Units: LAS/LAZ coordinates
+finest cell is about its resolution: the point spacing, or three times the points' noise about
+their surface where that is longer (cloud.* parameters); its smallest rock is
+cloud.min_rock_spacings resolutions (in place of the 20-edge floor below, which is what a mesh
+from photos resolves). Units: LAS/LAZ coordinates
 are taken as metres (scale method "input units"), other files as model units (no metres, no
 verdict) unless --units names their unit (scale method "given").
 

@@ -214,10 +214,11 @@ class SegmentParams:
             a Poisson surface resolves nothing finer than its cell, about an edge, and a border
             shallower than that lies in its noise]. It binds only where a fragment's join depth
             (``border_depth`` of a fragment's root area, 0.071 ``min_rock_b``) is under it: a
-            smallest rock under 14 edge lengths, as a cloud's 10 point spacings give (see
+            smallest rock under 14 edge lengths, as a cloud's 10 resolutions give (see
             ``cloud.min_rock_spacings``); the photo route's floor of 20 leaves it idle. On a 1.2
             M-point survey at 2.8 mm of 220 rocks of 10-35 cm (bench/bench_cloud.py --spacing
-            0.0025; smallest rock 9 edge lengths) 0 reported 794 rocks for 203 found, 528 of the
+            0.0025, meshed at its spacing before ``cloud.noise_sigmas``; smallest rock 9 edge
+            lengths) 0 reported 794 rocks for 203 found, 528 of the
             others pieces of found rocks whose borders lay a median 0.93 edge lengths deep (0.087
             of their root area); 1 reported 593 (1.5: 429, but 1.5 binds at 20 edges too); at
             7.5 mm (smallest rock 10 edge lengths) 215 for 198 found became 214.
