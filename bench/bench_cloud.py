@@ -12,11 +12,13 @@ cached under ``--cache``.
 With ``--bed`` the rocks cover the ground as a gravel bar's do (``stockpile_ros.tools.sim.bed``),
 with ``--rounding`` their edges are worn round as a river's, ``--gradation`` sets their b: a
 gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m, a few hundred grains) is
-``--bed --rounding 0.3 --gradation 0.1:0.4 --rocks 400 --spacing 0.01``.
+``--bed --rounding 0.3 --gradation 0.1:0.4 --rocks 400 --spacing 0.01``. With ``--falloff 2``
+the points thin out with range as a scanner's do (``--spacing`` is then the spacing nearest a
+scanner).
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
-        [--bed] [--rounding R] [--cache DIR] [--set NAME=VALUE ...]
+        [--bed] [--rounding R] [--falloff P] [--cache DIR] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -59,7 +61,8 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
         scene = BedConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
     else:
         scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
-    made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002)
+    made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
+                           falloff=args.falloff)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -87,6 +90,8 @@ def run() -> None:
     parser.add_argument('--gradation', default='0.1:0.35', help='b of the rocks [m]')
     parser.add_argument('--rounding', type=float, default=0.0, help='edges worn round [rad]')
     parser.add_argument('--bed', action='store_true', help='a bed covering the ground')
+    parser.add_argument('--falloff', type=float, default=0.0,
+                        help='density falling as range to this power (2: a scanner)')  # fmt: skip
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                         help="passed to stockpile segment's --set")  # fmt: skip
@@ -96,6 +101,8 @@ def run() -> None:
     if args.bed or args.rounding or args.gradation != '0.1:0.35':
         kind = 'bed' if args.bed else 'pile'
         folder = folder.with_name(f'{folder.name}_{kind}_{args.gradation}_{args.rounding:g}')
+    if args.falloff:
+        folder = folder.with_name(f'{folder.name}_falloff{args.falloff:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)

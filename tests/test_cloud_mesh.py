@@ -221,6 +221,25 @@ def test_a_gravel_bar_survey_from_file_to_report(tmp_path) -> None:  # type: ign
     assert abs(scores['gradation']['d50_error']) < 0.08
 
 
+def test_a_scanner_survey_thins_out_with_range(survey, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    _, even = survey
+    pile = PileConfig(rocks=30, gradation=parse_gradation('0.12:0.3'))
+    s = simulate_survey(tmp_path / 'truth', pile, seed=1, spacing=0.01, noise=0.002, falloff=2.0)
+    assert s.truth['scene']['survey']['falloff'] == 2.0
+    assert s.truth['rocks'] == even.truth['rocks']
+    assert len(s.points) < 0.8 * len(even.points)
+    # Kept in some places more than in others: by range, not evenly at random.
+    kept = []
+    for points in (even.points, s.points):
+        plan = even.survey_to_pile.apply(points)[:, :2]
+        cells = np.floor(plan / 0.2).astype(np.int64)
+        unique, counts = np.unique(cells, axis=0, return_counts=True)
+        kept.append(dict(zip(map(tuple, unique), counts, strict=True)))
+    share = np.array([kept[1].get(c, 0) / n for c, n in kept[0].items() if n >= 100])
+    lo, hi = np.percentile(share, [10, 90])
+    assert hi > 1.5 * lo
+
+
 def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-untyped-def]
     root, s = survey
     # Metres unless told otherwise only for a survey format; a PLY without --units is model units.

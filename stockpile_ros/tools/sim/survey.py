@@ -72,6 +72,7 @@ def simulate_survey(
     seed: int = 0,
     spacing: float = 0.01,
     noise: float = 0.002,
+    falloff: float = 0.0,
     tilt_deg: float = 10.0,
     offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
 ) -> Survey:
@@ -83,6 +84,10 @@ def simulate_survey(
         seed: Random seed of the pile, the samples and the noise.
         spacing: Median distance between neighbouring points, about [m].
         noise: Standard deviation of the range noise, along each point's normal [m].
+        falloff: Each point is kept with probability ``(d_min / d) ** falloff``, ``d`` its
+            distance to the nearest scanner position: 2 thins the points with range as a
+            scanner's angular step does (its density falls as the range squared), so that
+            ``spacing`` is the spacing nearest a scanner; 0 keeps one point to a cell everywhere.
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
 
@@ -109,13 +114,18 @@ def simulate_survey(
     # of uniform random samples).
     cells = np.floor(dense.points / (_CELL * spacing)).astype(np.int64)
     _, first = np.unique(cells, axis=0, return_index=True)
+    if falloff > 0:
+        # Thinned at random, not on a coarser grid: gaps and clumps, as where stations overlap.
+        eye = np.min(np.linalg.norm(dense.points[first, None] - eyes[None], axis=2), axis=1)
+        first = first[rng.random(len(first)) < (eye.min() / eye) ** falloff]
     sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
     truth = {
         'schema': TRUTH_SCHEMA,
         'units': 'm',
         'frame_id': 'pile',
         'seed': seed,
-        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'tilt_deg': tilt_deg,
+        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
+                             'tilt_deg': tilt_deg,
                              'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
                              'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
