@@ -62,7 +62,7 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
     else:
         scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
     made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
-                           falloff=args.falloff)  # fmt: skip
+                           falloff=args.falloff, aspect=args.aspect)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -90,6 +90,8 @@ def run() -> None:
     parser.add_argument('--gradation', default='0.1:0.35', help='b of the rocks [m]')
     parser.add_argument('--rounding', type=float, default=0.0, help='edges worn round [rad]')
     parser.add_argument('--bed', action='store_true', help='a bed covering the ground')
+    parser.add_argument('--aspect', type=float, default=1.0,
+                        help='scan lines: spacing across them over spacing along')  # fmt: skip
     parser.add_argument('--falloff', type=float, default=0.0,
                         help='density falling as range to this power (2: a scanner)')  # fmt: skip
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
@@ -103,6 +105,8 @@ def run() -> None:
         folder = folder.with_name(f'{folder.name}_{kind}_{args.gradation}_{args.rounding:g}')
     if args.falloff:
         folder = folder.with_name(f'{folder.name}_falloff{args.falloff:g}')
+    if args.aspect != 1.0:
+        folder = folder.with_name(f'{folder.name}_aspect{args.aspect:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)

@@ -4,10 +4,14 @@ Up is given (``cloud.up``) or the normal of the cloud's trend plane: a robust le
 over every point (Tukey's biweight, its scale from the quarter of the points nearest the plane,
 iteratively reweighted from the plane through three points that has the least quarter-point
 residual), so that on a pile with ground around it the ground wins and on a grain-covered bar,
-which has no bare ground, the bar's trend does. No single patch of ground is looked for. The
-plane's sign: the side most given normals point to; else the side the surface bulges towards
-over most of its area (rocks are convex and the valleys between them narrow; a tool's frame may
-have any axis up, as Structure-from-Motion ones do); else the input's +z.
+which has no bare ground, the bar's trend does. Each point weighs as much as the surface it
+stands for (the square of the distance to its 16th nearest point): it is the surface's trend,
+and a scanner samples the faces turned to it, and the rows it sweeps, more densely than others.
+The biweight is refined from several starts and the plane the surface hugs most tightly kept. No
+single patch of ground is looked for. The plane's sign: the side most given normals point to;
+else the side the surface bulges towards over most of its area (rocks are convex and the valleys
+between them narrow; a tool's frame may have any axis up, as Structure-from-Motion ones do); else
+the input's +z.
 z = 0 is the plane moved down to a low percentile of the heights: the ground where some shows,
 the bottom of the gaps between grains where none does, so that the surface lies above it.
 """
@@ -38,12 +42,18 @@ _ITERATIONS = 30
 # quarter of the points on the ground, 1000 triples miss an all-ground one with odds
 # (63/64)^1000, about 1e-7.
 _TRIPLES = 1000
-_START_SAMPLE = 5000
+_START_SAMPLE = 2000
+# Starts the biweight is refined from: the triples of least quarter-plan residual.
+_STARTS = 8
 # More points than this add nothing to a plane's three parameters but time.
-_PLANE_SAMPLE = 200_000
+_PLANE_SAMPLE = 50_000
 # How far from half the share of bulging points must be to tell the sides apart, and the points
 # (sampled) and neighbourhoods (points) that share is taken over.
 _CONVEX_MARGIN = 0.05
+# Points whose distances give the surface each point stands for, and the most it may weigh, in
+# medians (a stray point far from the rest stands for no surface).
+_AREA_NEIGHBOURS = 16
+_AREA_MAX = 10.0
 _CONVEX_SAMPLE = 20_000
 _CONVEX_NEIGHBOURS = 50
 _FLAT = 1e-9
@@ -76,25 +86,82 @@ def _plane(points: F64, weights: F64) -> tuple[F64, F64]:
     return np.asarray(vectors[:, 0]), np.asarray(centre)
 
 
-def _spread(residuals: F64) -> float:
-    """Return the standard deviation of the residuals of the points nearest the plane."""
-    return _QUANTILE_SIGMA * float(np.percentile(np.abs(residuals), _QUANTILE))
+def _spread(residuals: F64, area: F64) -> float:
+    """Return the standard deviation of the residuals of the surface nearest the plane."""
+    size = np.abs(residuals)
+    order = np.argsort(size)
+    cumulative = np.cumsum(area[order])
+    at = int(np.searchsorted(cumulative, _QUANTILE / 100.0 * cumulative[-1]))
+    return _QUANTILE_SIGMA * float(size[order[min(at, len(order) - 1)]])
 
 
-def _least_quantile_plane(points: F64, rng: np.random.Generator) -> tuple[F64, F64]:
-    """Return the plane through three of ``points`` whose quarter-point residual is least."""
-    sample = points[rng.choice(len(points), min(len(points), _START_SAMPLE), replace=False)]
+def _surface(points: F64) -> tuple[F64, F64]:
+    """Return the surface each point stands for (in medians) and its unit normal (either way).
+
+    The area is the square of the distance to the point's 16th nearest (the inverse of the
+    density), the normal that of the plane through those points.
+    """
+    k = min(len(points) - 1, _AREA_NEIGHBOURS)
+    if k < 3:
+        return np.ones(len(points)), np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    distance, near = cKDTree(points).query(points, k=k + 1)
+    area = np.asarray(distance[:, -1] ** 2, dtype=np.float64)
+    typical = float(np.median(area))
+    area = np.minimum(area / typical, _AREA_MAX) if typical > 0 else np.ones(len(points))
+    local = points[near] - points[near].mean(axis=1, keepdims=True)
+    _, axes = np.linalg.eigh(np.einsum('nki,nkj->nij', local, local))
+    return np.asarray(area), np.asarray(axes[:, :, 0])
+
+
+def _start_planes(
+    points: F64, area: F64, facing: F64, rng: np.random.Generator
+) -> list[tuple[F64, F64]]:
+    """Return the planes through three of ``points`` whose quarter-plan residuals are least.
+
+    Each residual weighs as its point's plan on the plane (see :func:`_refine`), so that a
+    plane through ground is judged by the ground, not by faces the scanner saw densely.
+    """
+    pick = rng.choice(len(points), min(len(points), _START_SAMPLE), replace=False)
+    sample, weight, seen = points[pick], area[pick], facing[pick]
     tri = sample[rng.integers(0, len(sample), (_TRIPLES, 3))]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normals, axis=1)
     ok = length > 0
     if not ok.any():
-        return _plane(points, np.ones(len(points)))
+        return [_plane(points, np.ones(len(points)))]
     normals, tri = normals[ok] / length[ok, None], tri[ok]
     offsets = np.einsum('ij,ij->i', normals, tri[:, 0])
-    spread = np.percentile(np.abs(sample @ normals.T - offsets), _QUANTILE, axis=0)
-    best = int(np.argmin(spread))
-    return np.asarray(normals[best]), np.asarray(tri[best, 0])
+    residual = np.abs(sample @ normals.T - offsets)
+    plan = weight[:, None] * np.abs(seen @ normals.T)
+    order = np.argsort(residual, axis=0)
+    cumulative = np.cumsum(np.take_along_axis(plan, order, axis=0), axis=0)
+    at = np.argmax(cumulative >= _QUANTILE / 100.0 * cumulative[-1], axis=0)
+    spread = np.take_along_axis(residual, order, axis=0)[at, np.arange(len(at))]
+    return [(np.asarray(normals[k]), np.asarray(tri[k, 0])) for k in np.argsort(spread)[:_STARTS]]
+
+
+def _refine(sample: F64, area: F64, normals: F64, normal: F64, centre: F64) -> tuple[F64, float]:
+    """Return the biweight plane's normal reached from a start, and its residuals' spread.
+
+    Each point weighs as the plan of its surface on the plane: its area times the cosine of
+    its normal with the plane's.
+    """
+    plan = area * np.abs(normals @ normal)
+    spread = _spread((sample - centre) @ normal, plan)
+    for _ in range(_ITERATIONS):
+        if spread == 0:
+            break
+        u = (sample - centre) @ normal / (_TUKEY * spread)
+        weights = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0) * plan
+        if np.count_nonzero(weights) < 3:
+            break
+        previous = normal
+        normal, centre = _plane(sample, weights)
+        plan = area * np.abs(normals @ normal)
+        spread = _spread((sample - centre) @ normal, plan)
+        if abs(float(previous @ normal)) > 1 - 1e-12:
+            break
+    return normal, spread
 
 
 def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F64, str]:
@@ -102,20 +169,13 @@ def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F6
     rng = np.random.default_rng(seed)
     sample = points if len(points) <= _PLANE_SAMPLE else points[
         rng.choice(len(points), _PLANE_SAMPLE, replace=False)]  # fmt: skip
-    normal, centre = _least_quantile_plane(sample, rng)
-    for _ in range(_ITERATIONS):
-        r = (sample - centre) @ normal
-        spread = _spread(r)
-        if spread == 0:
-            break
-        u = r / (_TUKEY * spread)
-        weights = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
-        if weights.sum() < 3:
-            break
-        previous = normal
-        normal, centre = _plane(sample, weights)
-        if abs(float(previous @ normal)) > 1 - 1e-12:
-            break
+    area, facing = _surface(sample - sample.mean(axis=0))
+    # Refined from several starts, the plane the surface hugs most tightly: a pile over ground has
+    # more than one plane a biweight settles on (one leaning on the pile's foot), ground the
+    # tightest of them.
+    starts = _start_planes(sample, area, facing, rng)
+    fits = [_refine(sample, area, facing, n, c) for n, c in starts]
+    normal = min(fits, key=lambda fit: fit[1])[0]
     if normals is not None:
         side = float(np.mean(normals @ normal > 0))
         if side != 0.5:

@@ -73,6 +73,7 @@ def simulate_survey(
     spacing: float = 0.01,
     noise: float = 0.002,
     falloff: float = 0.0,
+    aspect: float = 1.0,
     tilt_deg: float = 10.0,
     offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
 ) -> Survey:
@@ -88,6 +89,9 @@ def simulate_survey(
             distance to the nearest scanner position: 2 thins the points with range as a
             scanner's angular step does (its density falls as the range squared), so that
             ``spacing`` is the spacing nearest a scanner; 0 keeps one point to a cell everywhere.
+        aspect: The cells one point is kept from are this many times longer along the pile's y
+            than along x and z: rows swept densely along x, far apart across them, as a
+            scanner's rows at a glancing angle or a cart's LiDAR's rings are (1: even).
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
 
@@ -112,7 +116,9 @@ def simulate_survey(
         truths.append(record)
     # One sample per cell of a grid, as evenly as a scanner's sweep lays them (not in the clumps
     # of uniform random samples).
-    cells = np.floor(dense.points / (_CELL * spacing)).astype(np.int64)
+    cells = np.floor(dense.points / (_CELL * spacing * np.array([1.0, aspect, 1.0]))).astype(
+        np.int64
+    )
     _, first = np.unique(cells, axis=0, return_index=True)
     if falloff > 0:
         # Thinned at random, not on a coarser grid: gaps and clumps, as where stations overlap.
@@ -125,7 +131,7 @@ def simulate_survey(
         'frame_id': 'pile',
         'seed': seed,
         'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
-                             'tilt_deg': tilt_deg,
+                             'aspect': aspect, 'tilt_deg': tilt_deg,
                              'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
                              'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
