@@ -14,11 +14,12 @@ with ``--rounding`` their edges are worn round as a river's, ``--gradation`` set
 gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m, a few hundred grains) is
 ``--bed --rounding 0.3 --gradation 0.1:0.4 --rocks 400 --spacing 0.01``. With ``--falloff 2``
 the points thin out with range as a scanner's do (``--spacing`` is then the spacing nearest a
-scanner).
+scanner); with ``--aspect 4`` they lie in rows four times farther apart across than along.
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
-        [--bed] [--rounding R] [--falloff P] [--cache DIR] [--set NAME=VALUE ...]
+        [--bed] [--rounding R] [--falloff P] [--aspect A] [--cache DIR]
+        [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
