@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 from ..errors import StockpileError
 from ..geometry import Similarity
 from ..recon.ground import pile_mask
+from .noise import neighbourhoods
 
 __all__ = ['level_transform', 'parse_up', 'trend_up']
 
@@ -104,12 +105,10 @@ def _surface(points: F64) -> tuple[F64, F64]:
     k = min(len(points) - 1, _AREA_NEIGHBOURS)
     if k < 3:
         return np.ones(len(points)), np.tile([0.0, 0.0, 1.0], (len(points), 1))
-    distance, near = cKDTree(points).query(points, k=k + 1)
-    area = np.asarray(distance[:, -1] ** 2, dtype=np.float64)
+    distance, _, axes = neighbourhoods(points, points, k + 1)
+    area = distance[:, -1] ** 2
     typical = float(np.median(area))
     area = np.minimum(area / typical, _AREA_MAX) if typical > 0 else np.ones(len(points))
-    local = points[near] - points[near].mean(axis=1, keepdims=True)
-    _, axes = np.linalg.eigh(np.einsum('nki,nkj->nij', local, local))
     return np.asarray(area), np.asarray(axes[:, :, 0])
 
 

@@ -16,7 +16,7 @@ import numpy.typing as npt
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
-__all__ = ['point_noise']
+__all__ = ['neighbourhoods', 'point_noise']
 
 F64 = npt.NDArray[np.float64]
 
@@ -24,6 +24,21 @@ F64 = npt.NDArray[np.float64]
 _TERMS = 6
 # The share of the fits read: the smoothest quarter.
 _QUANTILE = 0.25
+
+
+def neighbourhoods(points: F64, at: F64, k: int) -> tuple[F64, F64, F64]:
+    """Return the ``k`` points nearest each of ``at``, centred, and their principal axes.
+
+    Returns:
+        Distances to them (n x k, nearest first), their offsets from their mean (n x k x 3) and
+        the axes of those offsets (n x 3 x 3, columns by increasing spread: the first is the
+        normal of the plane through them).
+
+    """
+    distance, near = cKDTree(points).query(at, k=k)
+    local = points[near] - points[near].mean(axis=1, keepdims=True)
+    _, axes = np.linalg.eigh(np.einsum('nki,nkj->nij', local, local))
+    return np.asarray(distance, dtype=np.float64), local, np.asarray(axes)
 
 
 def point_noise(points: F64, neighbours: int = 20, sample: int = 20_000, seed: int = 0) -> float:
@@ -48,9 +63,7 @@ def point_noise(points: F64, neighbours: int = 20, sample: int = 20_000, seed: i
     pts = pts - pts.mean(axis=0)
     rng = np.random.default_rng(seed)
     at = rng.choice(len(pts), sample, replace=False) if len(pts) > sample else np.arange(len(pts))
-    _, near = cKDTree(pts).query(pts[at], k=neighbours)
-    local = pts[near] - pts[near].mean(axis=1, keepdims=True)
-    _, axes = np.linalg.eigh(np.einsum('nki,nkj->nij', local, local))
+    _, local, axes = neighbourhoods(pts, pts[at], neighbours)
     # Eigenvalues ascending: the first axis is the normal, the other two span the tangent plane.
     frame = np.einsum('nki,nij->nkj', local, axes)
     z, x, y = frame[..., 0], frame[..., 1], frame[..., 2]
