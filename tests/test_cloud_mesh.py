@@ -22,6 +22,7 @@ from stockpile_ros.cloud import (
     poisson_depth,
     trend_up,
 )
+from stockpile_ros.cloud.level import SIGN_FROM_INPUT_Z
 from stockpile_ros.cloud.noise import point_noise
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.recon.surface import PoissonOptions
@@ -249,6 +250,17 @@ def test_a_scanner_survey_thins_out_with_range(survey, tmp_path) -> None:  # typ
     share = np.array([kept[1].get(c, 0) / n for c, n in kept[0].items() if n >= 100])
     lo, hi = np.percentile(share, [10, 90])
     assert hi > 1.5 * lo
+
+
+def test_a_sign_up_taken_from_the_input_z_is_warned_of_unless_z_is_up_by_convention(survey) -> None:  # type: ignore[no-untyped-def]
+    _, s = survey
+    warned = []
+    for fmt in ('text', 'laz'):
+        cloud = Cloud(s.points, None, None, 'test', fmt)
+        _, info = mesh_cloud(cloud, CloudOptions(depth=7), PoissonOptions(), 1.0, 'given')
+        warned.append(any('--up X,Y,Z' in w for w in info.cloud['warnings']))
+        assert SIGN_FROM_INPUT_Z in info.cloud['up']['method']
+    assert warned == [True, False]
 
 
 def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-untyped-def]

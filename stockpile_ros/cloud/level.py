@@ -27,9 +27,12 @@ from ..geometry import Similarity
 from ..recon.ground import pile_mask
 from .noise import neighbourhoods
 
-__all__ = ['level_transform', 'parse_up', 'trend_up']
+__all__ = ['SIGN_FROM_INPUT_Z', 'level_transform', 'parse_up', 'trend_up']
 
 F64 = npt.NDArray[np.float64]
+
+#: How :func:`trend_up` says that neither the normals nor the surface told it which side is up.
+SIGN_FROM_INPUT_Z = "the input's +z (no side bulges)"
 
 # Tukey's biweight constant (95 % efficiency under Gaussian residuals).
 _TUKEY = 4.685
@@ -182,7 +185,7 @@ def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F6
     bulging = _bulging_share(points, normal, rng)
     if abs(bulging - 0.5) >= _CONVEX_MARGIN:
         return (normal if bulging > 0.5 else -normal), 'the side the surface bulges towards'
-    return (normal if normal[2] >= 0 else -normal), "the input's +z (no side bulges)"
+    return (normal if normal[2] >= 0 else -normal), SIGN_FROM_INPUT_Z
 
 
 def _bulging_share(points: F64, normal: F64, rng: np.random.Generator) -> float:

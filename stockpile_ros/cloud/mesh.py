@@ -28,7 +28,7 @@ from ..meshio import LabelledMesh
 from ..ranges import Range
 from ..recon.surface import PoissonOptions, poisson_surface
 from ..segment.params import RESOLVABLE_EDGES, SegmentParams
-from .level import level_transform, parse_up, trend_up
+from .level import SIGN_FROM_INPUT_Z, level_transform, parse_up, trend_up
 from .noise import point_noise
 from .orient import orient_outward
 from .read import Cloud
@@ -52,6 +52,8 @@ _ORIENTED_SHARE = 0.8
 _SPACING_SAMPLE = 100_000
 # Fewest points a surface can be meshed from.
 _MIN_POINTS = 100
+# Formats whose z is up by convention: survey coordinates, and a sensor's stream (REP 103).
+_Z_UP_FORMATS = frozenset({'las', 'laz', 'pointcloud2'})
 
 
 @dataclass(frozen=True)
@@ -266,6 +268,12 @@ def mesh_cloud(
     if up is None:
         up, why = trend_up(points, given)
         up_method = f'robust trend plane of every point; its sign: {why}'
+        if why == SIGN_FROM_INPUT_Z and cloud.format not in _Z_UP_FORMATS:
+            warnings.append(
+                "which side is up was taken from the input's +z: no normals were given and "
+                'neither side of the surface bulges clearly (a noisy cloud). If the input has z '
+                'down (NED, a camera frame), the pile was measured upside down: pass --up X,Y,Z'
+            )
     tilt = math.degrees(math.acos(min(1.0, abs(float(up[2])))))
     sim, plane = level_transform(points, up, metres_per_unit, options.ground_percentile)
     local = sim.apply(points)
