@@ -252,14 +252,24 @@ def test_a_scanner_survey_thins_out_with_range(survey, tmp_path) -> None:  # typ
     assert hi > 1.5 * lo
 
 
-def test_a_sign_up_taken_from_the_input_z_is_warned_of_unless_z_is_up_by_convention(survey) -> None:  # type: ignore[no-untyped-def]
+def test_which_side_is_up_without_normals(survey) -> None:  # type: ignore[no-untyped-def]
     _, s = survey
+    truth = s.survey_to_pile.rotation.T @ np.array([0.0, 0.0, 1.0])
+    # A pile over ground, the right way up or upside down (z down, as NED or a camera frame).
+    for turn in (np.eye(3), np.diag([1.0, -1.0, -1.0])):
+        up, why = trend_up(s.points @ turn.T)
+        assert float(up @ (turn @ truth)) > 0.99
+        assert why == 'the side the surface rises to from the plane it hugs'
+    # A noisy bed of grains with no bare ground: no side is clear, and a file whose z is not up
+    # by convention is warned of.
+    bed = _grain_bed(n=40, half=0.6, seed=2)
+    bed = bed + np.random.default_rng(0).normal(0.0, 0.002, bed.shape)
     warned = []
     for fmt in ('text', 'laz'):
-        cloud = Cloud(s.points, None, None, 'test', fmt)
+        cloud = Cloud(bed, None, None, 'test', fmt)
         _, info = mesh_cloud(cloud, CloudOptions(depth=7), PoissonOptions(), 1.0, 'given')
-        warned.append(any('--up X,Y,Z' in w for w in info.cloud['warnings']))
         assert SIGN_FROM_INPUT_Z in info.cloud['up']['method']
+        warned.append(any('--up X,Y,Z' in w for w in info.cloud['warnings']))
     assert warned == [True, False]
 
 

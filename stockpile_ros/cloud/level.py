@@ -1,17 +1,19 @@
 """Which way is up in a cloud, and the similarity that levels it into the ``stockpile`` frame.
 
 Up is given (``cloud.up``) or the normal of the cloud's trend plane: a robust least-squares plane
-over every point (Tukey's biweight, its scale from the quarter of the points nearest the plane,
-iteratively reweighted from the plane through three points that has the least quarter-point
-residual), so that on a pile with ground around it the ground wins and on a grain-covered bar,
-which has no bare ground, the bar's trend does. Each point weighs as much as the surface it
-stands for (the square of the distance to its 16th nearest point): it is the surface's trend,
-and a scanner samples the faces turned to it, and the rows it sweeps, more densely than others.
-The biweight is refined from several starts and the plane the surface hugs most tightly kept. No
-single patch of ground is looked for. The plane's sign: the side most given normals point to;
-else the side the surface bulges towards over most of its area (rocks are convex and the valleys
-between them narrow; a tool's frame may have any axis up, as Structure-from-Motion ones do); else
-the input's +z.
+over every point (Tukey's biweight, its scale from the quarter of the surface nearest the plane,
+iteratively reweighted from the planes through three points that have the least quarter
+residuals, the plane the surface hugs most tightly kept), so that on a pile with ground around it
+the ground wins and on a grain-covered bar, which has no bare ground, the bar's trend does. Each
+point weighs as the plan, on the plane, of the surface it stands for (the square of the distance
+to its 16th nearest point times the cosine of its normal with the plane's): it is the trend of
+the surface, not of the points, and a scanner samples the faces turned to it, and the rows it
+sweeps, more densely than others. No single patch of ground is looked for. The plane's sign: the
+side most given normals point to; else the side to which the surface rises clear of the plane,
+where it does to one side only (ground is seen from above, the pile on it); else the side the
+surface bulges towards over most of its area (rocks are convex and the valleys between them
+narrow; a tool's frame may have any axis up, as Structure-from-Motion ones do); else the input's
++z.
 z = 0 is the plane moved down to a low percentile of the heights: the ground where some shows,
 the bottom of the gaps between grains where none does, so that the surface lies above it.
 """
@@ -54,6 +56,13 @@ _PLANE_SAMPLE = 50_000
 # How far from half the share of bulging points must be to tell the sides apart, and the points
 # (sampled) and neighbourhoods (points) that share is taken over.
 _CONVEX_MARGIN = 0.05
+# Ground is seen from above: where the surface hugs the plane and a share of it of at least
+# _RISE_SHARE rises more than _RISE_SPREADS spreads to one side, with at most _RISE_OTHER times as
+# much to the other, that side is up (a pile or a bed within its ground). A bed with no bare
+# ground has the plane through its grains' tops and narrow gaps under it: no side is clear.
+_RISE_SPREADS = 3.0
+_RISE_SHARE = 0.1
+_RISE_OTHER = 0.1
 # Points whose distances give the surface each point stands for, and the most it may weigh, in
 # medians (a stray point far from the rest stands for no surface).
 _AREA_NEIGHBOURS = 16
@@ -142,8 +151,10 @@ def _start_planes(
     return [(np.asarray(normals[k]), np.asarray(tri[k, 0])) for k in np.argsort(spread)[:_STARTS]]
 
 
-def _refine(sample: F64, area: F64, normals: F64, normal: F64, centre: F64) -> tuple[F64, float]:
-    """Return the biweight plane's normal reached from a start, and its residuals' spread.
+def _refine(
+    sample: F64, area: F64, normals: F64, normal: F64, centre: F64
+) -> tuple[F64, F64, float]:
+    """Return the biweight plane reached from a start (normal, a point) and its residuals' spread.
 
     Each point weighs as the plan of its surface on the plane: its area times the cosine of
     its normal with the plane's.
@@ -163,7 +174,20 @@ def _refine(sample: F64, area: F64, normals: F64, normal: F64, centre: F64) -> t
         spread = _spread((sample - centre) @ normal, plan)
         if abs(float(previous @ normal)) > 1 - 1e-12:
             break
-    return normal, spread
+    return normal, centre, spread
+
+
+def _rising_side(residuals: F64, plan: F64, spread: float) -> int:
+    """Return +1 or -1 where the surface rises clear of the plane to one side only, else 0."""
+    if spread <= 0:
+        return 0
+    total = float(plan.sum())
+    above = float(plan[residuals > _RISE_SPREADS * spread].sum()) / total
+    below = float(plan[residuals < -_RISE_SPREADS * spread].sum()) / total
+    high, low = max(above, below), min(above, below)
+    if high < _RISE_SHARE or low > _RISE_OTHER * high:
+        return 0
+    return 1 if above > below else -1
 
 
 def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F64, str]:
@@ -177,11 +201,14 @@ def trend_up(points: F64, normals: F64 | None = None, seed: int = 0) -> tuple[F6
     # tightest of them.
     starts = _start_planes(sample, area, facing, rng)
     fits = [_refine(sample, area, facing, n, c) for n, c in starts]
-    normal = min(fits, key=lambda fit: fit[1])[0]
+    normal, centre, spread = min(fits, key=lambda fit: fit[2])
     if normals is not None:
         side = float(np.mean(normals @ normal > 0))
         if side != 0.5:
             return (normal if side > 0.5 else -normal), 'the side most given normals face'
+    rising = _rising_side((sample - centre) @ normal, area * np.abs(facing @ normal), spread)
+    if rising:
+        return rising * normal, 'the side the surface rises to from the plane it hugs'
     bulging = _bulging_share(points, normal, rng)
     if abs(bulging - 0.5) >= _CONVEX_MARGIN:
         return (normal if bulging > 0.5 else -normal), 'the side the surface bulges towards'
