@@ -56,6 +56,9 @@ _PLANE_SAMPLE = 50_000
 # How far from half the share of bulging points must be to tell the sides apart, and the points
 # (sampled) and neighbourhoods (points) that share is taken over.
 _CONVEX_MARGIN = 0.05
+_CONVEX_SAMPLE = 20_000
+_CONVEX_NEIGHBOURS = 50
+_FLAT = 1e-9
 # Ground is seen from above: where the surface hugs the plane and a share of it of at least
 # _RISE_SHARE rises more than _RISE_SPREADS spreads to one side, with at most _RISE_OTHER times as
 # much to the other, that side is up (a pile or a bed within its ground). A bed with no bare
@@ -67,9 +70,6 @@ _RISE_OTHER = 0.1
 # medians (a stray point far from the rest stands for no surface).
 _AREA_NEIGHBOURS = 16
 _AREA_MAX = 10.0
-_CONVEX_SAMPLE = 20_000
-_CONVEX_NEIGHBOURS = 50
-_FLAT = 1e-9
 
 
 def parse_up(text: str) -> F64 | None:
@@ -179,9 +179,9 @@ def _refine(
 
 def _rising_side(residuals: F64, plan: F64, spread: float) -> int:
     """Return +1 or -1 where the surface rises clear of the plane to one side only, else 0."""
-    if spread <= 0:
-        return 0
     total = float(plan.sum())
+    if spread <= 0 or total <= 0:
+        return 0
     above = float(plan[residuals > _RISE_SPREADS * spread].sum()) / total
     below = float(plan[residuals < -_RISE_SPREADS * spread].sum()) / total
     high, low = max(above, below), min(above, below)
