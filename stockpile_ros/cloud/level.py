@@ -34,7 +34,7 @@ __all__ = ['SIGN_FROM_INPUT_Z', 'level_transform', 'parse_up', 'trend_up']
 F64 = npt.NDArray[np.float64]
 
 #: How :func:`trend_up` says that neither the normals nor the surface told it which side is up.
-SIGN_FROM_INPUT_Z = "the input's +z (no side bulges)"
+SIGN_FROM_INPUT_Z = "the input's +z (no side rises or bulges clearly)"
 
 # Tukey's biweight constant (95 % efficiency under Gaussian residuals).
 _TUKEY = 4.685
@@ -99,13 +99,17 @@ def _plane(points: F64, weights: F64) -> tuple[F64, F64]:
     return np.asarray(vectors[:, 0]), np.asarray(centre)
 
 
+def _quarter(sizes: F64, weights: F64) -> F64:
+    """Return, per column, the size under which a quarter of the column's weight lies."""
+    order = np.argsort(sizes, axis=0)
+    cumulative = np.cumsum(np.take_along_axis(weights, order, axis=0), axis=0)
+    at = np.argmax(cumulative >= _QUANTILE / 100.0 * cumulative[-1], axis=0)
+    return np.asarray(np.take_along_axis(sizes, order, axis=0)[at, np.arange(sizes.shape[1])])
+
+
 def _spread(residuals: F64, area: F64) -> float:
     """Return the standard deviation of the residuals of the surface nearest the plane."""
-    size = np.abs(residuals)
-    order = np.argsort(size)
-    cumulative = np.cumsum(area[order])
-    at = int(np.searchsorted(cumulative, _QUANTILE / 100.0 * cumulative[-1]))
-    return _QUANTILE_SIGMA * float(size[order[min(at, len(order) - 1)]])
+    return _QUANTILE_SIGMA * float(_quarter(np.abs(residuals)[:, None], area[:, None])[0])
 
 
 def _surface(points: F64) -> tuple[F64, F64]:
@@ -143,11 +147,7 @@ def _start_planes(
     normals, tri = normals[ok] / length[ok, None], tri[ok]
     offsets = np.einsum('ij,ij->i', normals, tri[:, 0])
     residual = np.abs(sample @ normals.T - offsets)
-    plan = weight[:, None] * np.abs(seen @ normals.T)
-    order = np.argsort(residual, axis=0)
-    cumulative = np.cumsum(np.take_along_axis(plan, order, axis=0), axis=0)
-    at = np.argmax(cumulative >= _QUANTILE / 100.0 * cumulative[-1], axis=0)
-    spread = np.take_along_axis(residual, order, axis=0)[at, np.arange(len(at))]
+    spread = _quarter(residual, weight[:, None] * np.abs(seen @ normals.T))
     return [(np.asarray(normals[k]), np.asarray(tri[k, 0])) for k in np.argsort(spread)[:_STARTS]]
 
 

@@ -270,9 +270,10 @@ def mesh_cloud(
         up_method = f'robust trend plane of every point; its sign: {why}'
         if why == SIGN_FROM_INPUT_Z and cloud.format not in _Z_UP_FORMATS:
             warnings.append(
-                "which side is up was taken from the input's +z: no normals were given and "
-                'neither side of the surface bulges clearly (a noisy cloud). If the input has z '
-                'down (NED, a camera frame), the pile was measured upside down: pass --up X,Y,Z'
+                "which side is up was taken from the input's +z: no normals were given, the "
+                'surface rises clear of its trend plane to neither side only (no bare ground) '
+                'and bulges clearly to neither (a noisy cloud). If the input has z down (NED, a '
+                'camera frame), the pile was measured upside down: pass --up X,Y,Z'
             )
     tilt = math.degrees(math.acos(min(1.0, abs(float(up[2])))))
     sim, plane = level_transform(points, up, metres_per_unit, options.ground_percentile)
