@@ -131,6 +131,37 @@ def test_each_step_of_the_segmentation_is_reported_with_its_labels() -> None:
     assert len(np.unique(seen[0][1])) > len(np.unique(seg.labels))
 
 
+def test_far_valley_faces_are_in_a_rock_only_as_pieces_joined_to_it() -> None:
+    surface = _surface(8.0)
+
+    def run(pieces: bool) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        seen: dict[str, np.ndarray] = {}
+        params = SegmentParams(min_rock_b=SMALLEST, min_rock_edges=4.0, far_valley_pieces=pieces)
+        seg = segment_mesh(
+            surface.vertices,
+            surface.faces,
+            params,
+            on_step=lambda name, labels: seen.__setitem__(name, labels.copy()),
+        )
+        return seen, seg.labels
+
+    handed, out = run(False)
+    cut, joined = run(True)
+    assert 'valleys all' in handed and 'far pieces' not in handed
+    assert 'far pieces' in cut and 'valleys all' not in cut
+    # The steps before are the same; the far faces are the valley faces handed back last.
+    assert np.array_equal(cut['valleys near'], handed['valleys near'])
+    far = (handed['valleys near'] == 0) & (handed['valleys all'] > 0)
+    assert far.sum() > 100
+    # Handed back whole, every far face is left out at the end; as pieces, those joined stay.
+    assert not out[far].any()
+    assert 0 < np.count_nonzero(joined[far]) < far.sum()
+    # No rock is made of far faces alone: a piece joined to nothing is left out.
+    rocks = np.unique(joined[joined > 0])
+    anchored = np.unique(joined[(joined > 0) & ~far])
+    assert np.array_equal(rocks, anchored)
+
+
 def test_a_bed_of_a_hundred_rocks_is_segmented_and_measured() -> None:
     # 8 edges across the smallest b, under the default floor of 20 edges: with it, the rocks
     # under 20 edges are fragments and 6 of 61 visible rocks are found. With the floor at 4 edges,

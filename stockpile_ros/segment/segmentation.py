@@ -20,18 +20,19 @@ Two presets of :class:`SegmentParams`:
   a gap in the valley band, see ``split_at_necks``); the valley faces are handed back to
   the regions they border, growing from both sides of a valley until they meet (those that no
   region reaches going down into the valley within about a valley radius stay out of every
-  rock, see ``valley_reach``); a region that faces down and borders only ground is dropped (an
-  underside cut off from its rock); a region whose faces deep under its own convex hull cut it
-  into two or more parts of a fragment's area or more is split into them (two touching rocks
-  the search ran across where the crease between them is too shallow for the valley test at its
-  radius, see ``hull_split``); then neighbouring regions whose union stays convex across
-  their shared border are joined (on reconstructed piles, noise stops the search inside single
-  rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on another, see
-  ``merge_convex_borders``), the fragments left out before taking part and left out again
-  where joined to nothing (see ``convex_fragments``). A region that a wider valley cuts into two
-  or more large parts can be split into them last (``split_depth_ratio``, see
-  ``split_at_valleys``): off by default, as the neck split parts the rocks it was for and it cut
-  single rough rocks.
+  rock, see ``valley_reach``, or, with ``far_valley_pieces``, are cut by the search into pieces
+  that join a rock only where convex with it); a region that faces down and borders only ground
+  is dropped (an underside cut off from its rock); a region whose faces deep under its own
+  convex hull cut it into two or more parts of a fragment's area or more is split into them (two
+  touching rocks the search ran across where the crease between them is too shallow for the
+  valley test at its radius, see ``hull_split``); then neighbouring regions whose union stays
+  convex across their shared border are joined (on reconstructed piles, noise stops the search
+  inside single rocks: this took precision from 0.38 to 1.0 on one and from 0.81 to 1.0 on
+  another, see ``merge_convex_borders``), the fragments left out before taking part and left
+  out again where joined to nothing (see ``convex_fragments``). A region that a wider valley
+  cuts into two or more large parts can be split into them last (``split_depth_ratio``, see
+  ``split_at_valleys``): off by default, as the neck split parts the rocks it was for and it
+  cut single rough rocks.
 
 Scale: no length of the default mode is absolute, so a pile of sand grains and one of boulders
 meshed alike segment alike. The skirt Poisson leaves round the foot of a rock is a few of its
@@ -85,6 +86,7 @@ STEPS = (
     'necks',
     'valleys near',
     'valleys all',
+    'far pieces',
     'undersides',
     'hull split',
     'convex join',
@@ -162,6 +164,50 @@ def _most_convex_first(convexity: F64, faces: npt.NDArray[np.int64]) -> npt.NDAr
     return order
 
 
+def _restricted(
+    adj: FaceAdjacency, keep: npt.NDArray[np.bool_]
+) -> tuple[FaceAdjacency, npt.NDArray[np.bool_]]:
+    """Return the edges of ``adj`` between two ``keep`` faces, and which edges of ``adj`` they are.
+
+    ``adj`` itself when every face is kept.
+    """
+    if keep.all():
+        return adj, np.ones(len(adj.i), dtype=bool)
+    both = keep[adj.i] & keep[adj.j]
+    return FaceAdjacency(len(keep), adj.i[both], adj.j[both]), both
+
+
+def _search(
+    centroids: F64,
+    normals: F64,
+    search: FaceAdjacency,
+    within: npt.NDArray[np.bool_],
+    p: SegmentParams,
+) -> tuple[I32, npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """Run the paper's search (Eq. 2) over the edges of ``search`` from the faces ``within``.
+
+    Returns:
+        The per-face region ids (0 outside ``within``), and per edge of ``search`` whether Eq. 2
+        passes from ``i`` to ``j`` and from ``j`` to ``i``.
+
+    """
+    m = len(within)
+    towards_j, towards_i = edge_scores(centroids, normals, search.i, search.j)
+    pass_ij, pass_ji = towards_j > p.threshold, towards_i > p.threshold
+    if p.seed_order == 'index':
+        seeds = np.flatnonzero(within)
+    else:
+        total = np.bincount(search.i, weights=towards_j, minlength=m) + np.bincount(
+            search.j, weights=towards_i, minlength=m
+        )
+        count = search.neighbour_count()
+        convexity = np.where(count > 0, total / np.maximum(count, 1), -np.inf)
+        seeds = _most_convex_first(convexity, np.flatnonzero(within))
+    src = np.concatenate([search.i[pass_ij], search.j[pass_ji]])
+    dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
+    return grow_regions(m, src, dst, seeds), pass_ij, pass_ji
+
+
 def _no_step(name: str, labels: I32) -> None:
     """Take no note of a step."""
 
@@ -217,31 +263,11 @@ def segment_mesh(
     if p.valley_depth_ratio > 0 and depths:
         valley = (depths[0] > p.valley_depth_ratio * valley_radius) & active
         active &= ~valley
-    if active.all():
-        search = adj
-    else:
-        inner = active[adj.i] & active[adj.j]
-        search = FaceAdjacency(m, adj.i[inner], adj.j[inner])
-    towards_j, towards_i = edge_scores(geom.centroids, normals, search.i, search.j)
-    pass_ij, pass_ji = towards_j > p.threshold, towards_i > p.threshold
-    if search is adj:
-        passing = np.concatenate([pass_ij, pass_ji])
-    else:
-        passing = np.zeros(2 * len(adj.i), dtype=bool)
-        passing[: len(adj.i)][inner] = pass_ij
-        passing[len(adj.i) :][inner] = pass_ji
-    if p.seed_order == 'index':
-        seeds = np.flatnonzero(active)
-    else:
-        total = np.bincount(search.i, weights=towards_j, minlength=m) + np.bincount(
-            search.j, weights=towards_i, minlength=m
-        )
-        count = search.neighbour_count()
-        convexity = np.where(count > 0, total / np.maximum(count, 1), -np.inf)
-        seeds = _most_convex_first(convexity, np.flatnonzero(active))
-    src = np.concatenate([search.i[pass_ij], search.j[pass_ji]])
-    dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
-    labels = grow_regions(m, src, dst, seeds)
+    search, inner = _restricted(adj, active)
+    labels, pass_ij, pass_ji = _search(geom.centroids, normals, search, active, p)
+    passing = np.zeros(2 * len(adj.i), dtype=bool)
+    passing[: len(adj.i)][inner] = pass_ij
+    passing[len(adj.i) :][inner] = pass_ji
     step = on_step or _no_step
     step('search', labels)
     raw = int(labels.max()) if m else 0
@@ -274,10 +300,30 @@ def segment_mesh(
             labels = hand_back(labels, adj, valley, rings, down)
             far = valley & (labels == 0)
             step('valleys near', labels)
-        # Every valley face, for the clean-ups to see regions that meet along the valleys'
-        # middles; the far ones are left out again at the end.
-        labels = hand_back(labels, adj, valley)
-        step('valleys all', labels)
+        if p.far_valley_pieces and far.any():
+            # The far valley faces cut by the search into pieces that join a rock only where
+            # convex with it (as the fragments left out do): handed back whole, they carried
+            # the sunk rocks round a partly buried one into its hull, and its own pieces were
+            # then not convex together.
+            within, _ = _restricted(adj, far)
+            pieces, _, _ = _search(geom.centroids, normals, within, far, p)
+            pieces = merge_fragments(
+                pieces,
+                within,
+                geom.areas,
+                min_area,
+                p.merge_fragments,
+                p.fragment_min_border,
+                adj.neighbour_count(),
+            )
+            labels = np.where(pieces > 0, pieces + labels.max(), labels).astype(np.int32)
+            loose |= far
+            step('far pieces', labels)
+        else:
+            # Every valley face, for the clean-ups to see regions that meet along the valleys'
+            # middles; the far ones are left out again at the end.
+            labels = hand_back(labels, adj, valley)
+            step('valleys all', labels)
         search = adj
     if p.drop_facing_down:
         # After the valley faces are handed back: a region that reaches a rock across a valley
@@ -312,9 +358,12 @@ def segment_mesh(
         deep = depths[-1] > p.split_depth_ratio * split_radius
         labels = split_at_valleys(labels, adj, geom.areas, deep, p.split_min_share)
         step('valley split', labels)
-    # Every valley face is handed back first, so that the regions border each other along the
-    # valleys' middles where the clean-ups look; the far ones are then left out of every rock.
-    labels = np.where(far, 0, labels).astype(np.int32)
+    # The far valley faces are left out of every rock but those joined to one as pieces
+    # (far_valley_pieces); handed back, they were there for the clean-ups alone.
     if far.any():
+        if p.far_valley_pieces:
+            labels = drop_unanchored(labels, far)
+        else:
+            labels = np.where(far, 0, labels).astype(np.int32)
         step('far valleys out', labels)
     return Segmentation(_renumber_by_size(labels), f, geom, adj, passing, raw, p, scale, ground)
