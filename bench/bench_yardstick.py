@@ -40,14 +40,17 @@ With ``--steps`` each row is followed by what each step of ``segment_mesh`` left
 the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
 at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
 gains and which loses rocks (from the row's own run, whose seconds then include copying the
-labels). The beds and their meshed surfaces are kept under ``--cache`` (a
+labels). With ``--mass`` each row is followed by the true rocks' mass in bands of their visible
+fraction, against the measured mass of the reported rocks lying mostly on rocks of that band
+(the D50 is by mass against every rock, buried ones included: this tells which rocks carry its
+error). The beds and their meshed surfaces are kept under ``--cache`` (a
 30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each surface once.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--rounding 0] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
-        [--steps] [--set FIELD=VALUE ...]
+        [--steps] [--mass] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ import argparse  # noqa: E402
 import ast  # noqa: E402
 import contextlib  # noqa: E402
 import hashlib  # noqa: E402
+import itertools  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
@@ -70,7 +74,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stockpile_ros.cloud.mesh import CloudOptions  # noqa: E402
-from stockpile_ros.segment.measure import MeasureParams  # noqa: E402
+from stockpile_ros.segment.measure import MeasureParams, RockMeasure  # noqa: E402
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
@@ -147,6 +151,39 @@ def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> 
     return cached(args.cache / f'surface-{material}-{across:g}-{key}.pickle', make)
 
 
+#: Bands of the visible fraction ``--mass`` sums the masses in.
+VISIBLE_BANDS = (0.0, 0.1, 0.3, 0.5, 1.0)
+
+
+def mass_by_visibility(
+    surface: BedSurface, labels: np.ndarray, areas: np.ndarray, rocks: list[RockMeasure]
+) -> str:
+    """Return the true and measured mass [kg] per band of visible fraction.
+
+    Each reported rock counts with the true rock under most of its area (``on ground`` where
+    that is the ground).
+    """
+    width = int(surface.labels.max()) + 1
+    pair = labels.astype(np.int64) * width + surface.labels
+    shared = np.bincount(pair, weights=areas, minlength=(int(labels.max()) + 1) * width)
+    shared = shared.reshape(-1, width)
+    truth = [surface.rocks.get(k) for k in range(width)]
+    seen = np.array([-1.0 if r is None else r['visible_fraction'] for r in truth])
+    true_mass = np.array([0.0 if r is None else r['mass'] for r in truth])
+    band = np.searchsorted(VISIBLE_BANDS[1:-1], seen, side='right')
+    measured = np.zeros(len(VISIBLE_BANDS))
+    for rock in rocks:
+        under = int(np.argmax(shared[rock.id]))
+        # The last slot holds what lies on the ground.
+        measured[band[under] if seen[under] >= 0 else -1] += rock.mass
+    parts = [
+        f'{lo:.0%}-{hi:.0%} visible {true_mass[(band == i) & (seen >= 0)].sum():.3g} true, '
+        f'{measured[i]:.3g} measured'
+        for i, (lo, hi) in enumerate(itertools.pairwise(VISIBLE_BANDS))
+    ]
+    return 'mass [kg]: ' + '; '.join(parts) + f'; on ground {measured[-1]:.3g}'
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rocks', type=int, default=300)
@@ -169,6 +206,9 @@ def main() -> None:
     parser.add_argument('--wave-length', type=float, default=10.0, help='its length [largest b]')
     parser.add_argument(
         '--steps', action='store_true', help='after each row, what each step left of its rocks'
+    )
+    parser.add_argument(
+        '--mass', action='store_true', help='after each row, mass by visible fraction of the rocks'
     )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
@@ -231,6 +271,8 @@ def main() -> None:
             cost.append((len(surface.faces), seconds))
             seen = MatchOptions().visible_threshold
             visible = [k for k, r in truth.items() if r.visible_fraction >= seen]
+            if args.mass:
+                print('    ' + mass_by_visibility(surface, seg.labels, seg.geometry.areas, rocks))
             for name, labels in steps:
                 outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
                 print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
