@@ -273,17 +273,16 @@ def segment_mesh(
     raw = int(labels.max()) if m else 0
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
     loose = np.zeros(m, dtype=bool)
+    degree = adj.neighbour_count()
+
+    def merge(regions: I32, within: FaceAdjacency) -> I32:
+        return merge_fragments(
+            regions, within, geom.areas, min_area, p.merge_fragments, p.fragment_min_border, degree
+        )
+
     if min_area > 0:
         searched = labels > 0
-        labels = merge_fragments(
-            labels,
-            search,
-            geom.areas,
-            min_area,
-            p.merge_fragments,
-            p.fragment_min_border,
-            adj.neighbour_count(),
-        )
+        labels = merge(labels, search)
         step('fragments', labels)
         loose = searched & (labels == 0)
         if p.neck_radii > 0:
@@ -307,15 +306,7 @@ def segment_mesh(
             # then not convex together.
             within, _ = _restricted(adj, far)
             pieces, _, _ = _search(geom.centroids, normals, within, far, p)
-            pieces = merge_fragments(
-                pieces,
-                within,
-                geom.areas,
-                min_area,
-                p.merge_fragments,
-                p.fragment_min_border,
-                adj.neighbour_count(),
-            )
+            pieces = merge(pieces, within)
             labels = np.where(pieces > 0, pieces + labels.max(), labels).astype(np.int32)
             loose |= far
             step('far pieces', labels)
