@@ -40,17 +40,18 @@ With ``--steps`` each row is followed by what each step of ``segment_mesh`` left
 the visible rocks (``label_outcomes``: each rock through the region holding most of it, matched
 at IoU 0.5, in a region with other surface, in pieces, or short of that), to tell which step
 gains and which loses rocks (from the row's own run, whose seconds then include copying the
-labels). With ``--mass`` each row is followed by the true rocks' mass in bands of their visible
-fraction, against the measured mass of the reported rocks lying mostly on rocks of that band
-(the D50 is by mass against every rock, buried ones included: this tells which rocks carry its
-error). The beds and their meshed surfaces are kept under ``--cache`` (a
+labels). With ``--bands`` each row is followed by, in bands of the true rocks' visible fraction,
+how many of them were found (matched one to one) and their mass against the measured mass of the
+reported rocks lying mostly on rocks of that band (the recall counts every rock at least 30 %
+visible, and the D50 is by mass against every rock, buried ones included: this tells which rocks
+carry their errors). The beds and their meshed surfaces are kept under ``--cache`` (a
 30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each surface once.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--rounding 0] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
-        [--steps] [--mass] [--set FIELD=VALUE ...]
+        [--steps] [--bands] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ import hashlib  # noqa: E402
 import itertools  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
+from collections.abc import Callable, Collection  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -151,17 +152,21 @@ def surveyed(placed, material: str, across: float, args: argparse.Namespace) -> 
     return cached(args.cache / f'surface-{material}-{across:g}-{key}.pickle', make)
 
 
-#: Bands of the visible fraction ``--mass`` sums the masses in.
-VISIBLE_BANDS = (0.0, 0.1, 0.3, 0.5, 1.0)
+#: Bands of the visible fraction ``--bands`` counts the rocks and sums the masses in.
+VISIBLE_BANDS = (0.0, 0.1, 0.3, 0.4, 0.5, 1.0)
 
 
-def mass_by_visibility(
-    surface: BedSurface, labels: np.ndarray, areas: np.ndarray, rocks: list[RockMeasure]
+def by_visibility(
+    surface: BedSurface,
+    labels: np.ndarray,
+    areas: np.ndarray,
+    rocks: list[RockMeasure],
+    found: Collection[int],
 ) -> str:
-    """Return the true and measured mass [kg] per band of visible fraction.
+    """Return per band of visible fraction the true rocks, those ``found`` and their masses [kg].
 
-    Each reported rock counts with the true rock under most of its area (``on ground`` where
-    that is the ground).
+    The measured mass of each reported rock counts in the band of the true rock under most of
+    its area (``on ground`` where that is the ground).
     """
     width = int(surface.labels.max()) + 1
     pair = labels.astype(np.int64) * width + surface.labels
@@ -171,17 +176,20 @@ def mass_by_visibility(
     seen = np.array([-1.0 if r is None else r['visible_fraction'] for r in truth])
     true_mass = np.array([0.0 if r is None else r['mass'] for r in truth])
     band = np.searchsorted(VISIBLE_BANDS[1:-1], seen, side='right')
+    hit = np.isin(np.arange(width), list(found))
     measured = np.zeros(len(VISIBLE_BANDS))
     for rock in rocks:
         under = int(np.argmax(shared[rock.id]))
         # The last slot holds what lies on the ground.
         measured[band[under] if seen[under] >= 0 else -1] += rock.mass
-    parts = [
-        f'{lo:.0%}-{hi:.0%} visible {true_mass[(band == i) & (seen >= 0)].sum():.3g} true, '
-        f'{measured[i]:.3g} measured'
-        for i, (lo, hi) in enumerate(itertools.pairwise(VISIBLE_BANDS))
-    ]
-    return 'mass [kg]: ' + '; '.join(parts) + f'; on ground {measured[-1]:.3g}'
+    parts = []
+    for i, (lo, hi) in enumerate(itertools.pairwise(VISIBLE_BANDS)):
+        inside = (band == i) & (seen >= 0)
+        parts.append(
+            f'{lo:4.0%}-{hi:4.0%} visible: {hit[inside].sum():3d} of {inside.sum():3d} found, mass '
+            f'{true_mass[inside].sum():8.3g} kg true, {measured[i]:8.3g} kg measured'
+        )
+    return '\n'.join([*parts, f'on ground: {measured[-1]:.3g} kg measured'])
 
 
 def main() -> None:
@@ -208,7 +216,9 @@ def main() -> None:
         '--steps', action='store_true', help='after each row, what each step left of its rocks'
     )
     parser.add_argument(
-        '--mass', action='store_true', help='after each row, mass by visible fraction of the rocks'
+        '--bands',
+        action='store_true',
+        help='after each row, rocks found and mass by band of visible fraction',
     )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
@@ -271,8 +281,10 @@ def main() -> None:
             cost.append((len(surface.faces), seconds))
             seen = MatchOptions().visible_threshold
             visible = [k for k, r in truth.items() if r.visible_fraction >= seen]
-            if args.mass:
-                print('    ' + mass_by_visibility(surface, seg.labels, seg.geometry.areas, rocks))
+            if args.bands:
+                found = [k for _, k in s.pairs]
+                bands = by_visibility(surface, seg.labels, seg.geometry.areas, rocks, found)
+                print('\n'.join('    ' + line for line in bands.splitlines()))
             for name, labels in steps:
                 outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
                 print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))

@@ -85,6 +85,7 @@ def test_perfect_labels_score_perfectly_and_a_merge_does_not() -> None:
     same = score_labels(true_labels, true_labels, areas, truth, truth)
     assert (same.visible, same.found, same.recall, same.precision) == (2, 2, 1.0, 1.0)
     assert same.b_error == 0.0
+    assert sorted(same.pairs) == [(1, 1), (2, 2), (3, 3)]
     # Rock 3 is barely visible: its match counts neither way, and nor would its pieces.
     assert same.reported == 3
     halves, pieces = np.array([1, 1, 2, 2, 2, 3, 3, 0]), np.array([1, 1, 2, 2, 2, 3, 4, 0])
@@ -95,6 +96,8 @@ def test_perfect_labels_score_perfectly_and_a_merge_does_not() -> None:
     merged = np.array([1, 1, 1, 1, 1, 3, 0])
     score = score_labels(true_labels, merged, areas, truth, {1: SizedRock(2.0, 9.0), 3: truth[3]})
     assert (score.found, score.merges) == (1, 1)
+    # The region of two rocks is matched to the one holding most of it, the larger.
+    assert set(score.pairs) == {(1, 2), (3, 3)}
     assert score.recall == 0.5
     assert score.precision == 1.0
     assert score.b_error == 0.0

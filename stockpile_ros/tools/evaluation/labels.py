@@ -64,6 +64,7 @@ class LabelScore:
         d50_true_visible: D50 by mass of the visible true rocks [m].
         d50_error_visible: ``d50 / d50_true_visible - 1``: the reported rocks include the
             barely visible ones found, so this is not like for like.
+        pairs: Every one-to-one match as (reported id, true id), barely visible rocks' too.
 
     """
 
@@ -81,6 +82,7 @@ class LabelScore:
     d50_error: float
     d50_true_visible: float
     d50_error_visible: float
+    pairs: tuple[tuple[int, int], ...]
 
 
 def _d50(rocks: list[SizedRock]) -> float:
@@ -136,6 +138,7 @@ def score_labels(
         d50_error=d50 / d50_true - 1.0,
         d50_true_visible=d50_visible,
         d50_error_visible=d50 / d50_visible - 1.0,
+        pairs=tuple((r, k) for r, k, _ in matching.pairs),
     )
 
 
