@@ -44,14 +44,19 @@ labels). With ``--bands`` each row is followed by, in bands of the true rocks' v
 how many of them were found (matched one to one) and their mass against the measured mass of the
 reported rocks lying mostly on rocks of that band (the recall counts every rock at least 30 %
 visible, and the D50 is by mass against every rock, buried ones included: this tells which rocks
-carry their errors). The beds and their meshed surfaces are kept under ``--cache`` (a
-30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each surface once.
+carry their errors). With ``--true-labels`` each row is followed by the same measurement on the
+true labels (every rock's seen surface one region, as a segmentation that never erred would
+report it, slivers of buried rocks included and sheets left out as ``segment_and_measure`` leaves
+them), scored the same way: what of the row's median b error and D50 error the measurement of the
+seen surfaces carries whatever the segmentation does. The beds and their meshed surfaces are
+kept under ``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings
+meshes each surface once.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--rounding 0] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
-        [--steps] [--bands] [--set FIELD=VALUE ...]
+        [--steps] [--bands] [--true-labels] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -64,6 +69,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 import argparse  # noqa: E402
 import ast  # noqa: E402
 import contextlib  # noqa: E402
+import dataclasses  # noqa: E402
 import hashlib  # noqa: E402
 import itertools  # noqa: E402
 import pickle  # noqa: E402
@@ -75,11 +81,18 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stockpile_ros.cloud.mesh import CloudOptions  # noqa: E402
-from stockpile_ros.segment.measure import MeasureParams, RockMeasure  # noqa: E402
+from stockpile_ros.segment.measure import (  # noqa: E402
+    MeasureParams,
+    RockMeasure,
+    measure_rocks,
+    split_sheets,
+)
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
+from stockpile_ros.segment.segmentation import Segmentation  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     OUTCOMES,
+    LabelScore,
     SizedRock,
     label_outcomes,
     score_labels,
@@ -192,6 +205,16 @@ def by_visibility(
     return '\n'.join([*parts, f'on ground: {measured[-1]:.3g} kg measured'])
 
 
+def on_true_labels(
+    surface: BedSurface, seg: Segmentation, truth: dict[int, SizedRock]
+) -> LabelScore:
+    """Score the product's measurement of the true labels of ``surface`` (``seg``'s mesh)."""
+    true = dataclasses.replace(seg, labels=surface.labels.astype(np.int32))
+    rocks, _ = split_sheets(measure_rocks(surface.vertices, true, MeasureParams()), MeasureParams())
+    measured = {r.id: SizedRock(r.b, r.mass) for r in rocks}
+    return score_labels(surface.labels, true.labels, seg.geometry.areas, truth, measured)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rocks', type=int, default=300)
@@ -214,6 +237,11 @@ def main() -> None:
     parser.add_argument('--wave-length', type=float, default=10.0, help='its length [largest b]')
     parser.add_argument(
         '--steps', action='store_true', help='after each row, what each step left of its rocks'
+    )
+    parser.add_argument(
+        '--true-labels',
+        action='store_true',
+        help='after each row, the same measurement and score on the true labels',
     )
     parser.add_argument(
         '--bands',
@@ -285,6 +313,12 @@ def main() -> None:
                 found = [k for _, k in s.pairs]
                 bands = by_visibility(surface, seg.labels, seg.geometry.areas, rocks, found)
                 print('\n'.join('    ' + line for line in bands.splitlines()))
+            if args.true_labels:
+                t = on_true_labels(surface, seg, truth)
+                print(f'    on the true labels: {t.reported} rocks, median b error '
+                      f'{100 * t.b_error:.1f}%, b bias {100 * t.b_bias:+.1f}%, D50 error '
+                      f'{100 * t.d50_error:+.1f}% (against the visible rocks '
+                      f'{100 * t.d50_error_visible:+.1f}%)')  # fmt: skip
             for name, labels in steps:
                 outcome = label_outcomes(surface.labels, labels, seg.geometry.areas, visible)
                 print(f'    after {name:16s}' + ', '.join(f'{k} {outcome[k]}' for k in OUTCOMES))
