@@ -30,7 +30,10 @@ as ground), and the score
 against the true label of every face (``score_labels``: visible = at least 30 % of the rock's
 surface seen, one-to-one matches at surface IoU >= 0.5, reported rocks about barely visible ones
 counted neither way; the D50 error against every true rock, as ``stockpile evaluate`` scores it,
-and against the visible ones). One row per material and resolution;
+and against the visible ones; ``D50 90%`` is the interval a report gives the D50, from
+``bootstrap_intervals`` over the reported rocks with no doubt on the scale, against the same true
+D50: whether the uncertainty the product states holds the truth). One row per material and
+resolution;
 ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU time of
 ``segment_and_measure`` on one thread (which cores shared with other work do not inflate), and
 its growth with the face count (a least-squares power law over the resolutions) ends each
@@ -89,6 +92,7 @@ from stockpile_ros.segment.measure import (  # noqa: E402
 )
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
+from stockpile_ros.segment.qa import bootstrap_intervals  # noqa: E402
 from stockpile_ros.segment.segmentation import Segmentation  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     OUTCOMES,
@@ -260,7 +264,7 @@ def main() -> None:
           f'{args.wave} largest b over {args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
-          'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor')  # fmt: skip
+          'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor  D50 90%')  # fmt: skip
     for material in args.materials:
         placed = bed(material, args.rocks, args.seed, args.rounding, args.cache)
         lo, hi = MATERIALS[material]
@@ -300,11 +304,18 @@ def main() -> None:
             # rock given: --set min_rock_b=0).
             cut = truncation_warnings(seg.scale, [r.b for r in rocks], 'm')
             floor = 'cuts' if cut else '-'
+            lo_d50, hi_d50 = bootstrap_intervals(
+                [r.b for r in rocks], [r.mass for r in rocks], 0.0
+            ).mass['d50']
+            interval = '  '.join(
+                '-' if x is None else f'{100 * (x / s.d50_true - 1):+.0f}%'
+                for x in (lo_d50, hi_d50)
+            )
             print(f'{material:9s} {lo:4.2f}-{hi:4.2f}  {edges:7.1f} {len(surface.faces):8d} '
                   f'{s.visible:7d} {s.reported:8d} {s.found:5d} {s.recall:6.3f} '
                   f'{s.precision:9.3f} {s.merges:6d} {s.splits:6d}  {100 * s.b_error:6.1f}% '
                   f'{100 * s.b_bias:+5.1f}% {100 * s.d50_error:+6.1f}%  '
-                  f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}  {floor}',
+                  f'{100 * s.d50_error_visible:+6.1f}%  {seconds:7.1f}  {floor:5s}  {interval}',
                   flush=True)  # fmt: skip
             cost.append((len(surface.faces), seconds))
             seen = MatchOptions().visible_threshold
