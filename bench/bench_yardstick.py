@@ -30,10 +30,10 @@ as ground), and the score
 against the true label of every face (``score_labels``: visible = at least 30 % of the rock's
 surface seen, one-to-one matches at surface IoU >= 0.5, reported rocks about barely visible ones
 counted neither way; the D50 error against every true rock, as ``stockpile evaluate`` scores it,
-and against the visible ones; ``D50 90%`` is the interval a report gives the D50, from
-``bootstrap_intervals`` over the reported rocks with no doubt on the scale, against the same true
-D50: whether the uncertainty the product states holds the truth). One row per material and
-resolution;
+and against the visible ones; ``D50 90%`` is the interval a report gives the D50 (at
+``ReportOptions``' confidence, 90 %), from ``bootstrap_intervals`` over the reported rocks with
+no doubt on the scale, against the same true D50: whether the uncertainty the product states
+holds the truth). One row per material and resolution;
 ``edges/b`` is the smallest b over the mesh's median edge; ``seconds`` is the CPU time of
 ``segment_and_measure`` on one thread (which cores shared with other work do not inflate), and
 its growth with the face count (a least-squares power law over the resolutions) ends each
@@ -92,7 +92,7 @@ from stockpile_ros.segment.measure import (  # noqa: E402
 )
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
 from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
-from stockpile_ros.segment.qa import bootstrap_intervals  # noqa: E402
+from stockpile_ros.segment.qa import ReportOptions, bootstrap_intervals  # noqa: E402
 from stockpile_ros.segment.segmentation import Segmentation  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
     OUTCOMES,
@@ -214,7 +214,8 @@ def on_true_labels(
 ) -> LabelScore:
     """Score the product's measurement of the true labels of ``surface`` (``seg``'s mesh)."""
     true = dataclasses.replace(seg, labels=surface.labels.astype(np.int32))
-    rocks, _ = split_sheets(measure_rocks(surface.vertices, true, MeasureParams()), MeasureParams())
+    params = MeasureParams()
+    rocks, _ = split_sheets(measure_rocks(surface.vertices, true, params), params)
     measured = {r.id: SizedRock(r.b, r.mass) for r in rocks}
     return score_labels(surface.labels, true.labels, seg.geometry.areas, truth, measured)
 
@@ -264,7 +265,8 @@ def main() -> None:
           f'{args.wave} largest b over {args.wave_length}; '
           f'overrides: {overrides or "none"}')  # fmt: skip
     print('material  b range m   edges/b  faces    visible reported found recall precision '
-          'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor  D50 90%')  # fmt: skip
+          'merges splits  |b err| b bias  D50 err  D50 vis  seconds  floor  '
+          f'D50 {ReportOptions().confidence:.0%}')  # fmt: skip
     for material in args.materials:
         placed = bed(material, args.rocks, args.seed, args.rounding, args.cache)
         lo, hi = MATERIALS[material]
