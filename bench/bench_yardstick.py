@@ -51,7 +51,12 @@ carry their errors). With ``--true-labels`` each row is followed by the same mea
 true labels (every rock's seen surface one region, as a segmentation that never erred would
 report it, slivers of buried rocks included and sheets left out as ``segment_and_measure`` leaves
 them), scored the same way: what of the row's median b error and D50 error the measurement of the
-seen surfaces carries whatever the segmentation does. The beds and their meshed surfaces are
+seen surfaces carries whatever the segmentation does. With ``--floor F`` the smallest rock of
+interest is F times the material's smallest b, so that the bed's smaller rocks are fines under
+it, as a gravel bar's are under what its survey resolves: they are scored as the barely visible
+ones are (neither missed nor, found alone, counted either way; ``score_labels``' ``min_b``), the
+recall and ``D50 vis`` are over the rocks at or above it, and a line under the row counts the
+reported rocks made of several fines (false rocks). The beds and their meshed surfaces are
 kept under ``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings
 meshes each surface once.
 
@@ -59,7 +64,7 @@ Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]
         [--materials aggregate cobble riprap] [--rounding 0] [--noise 0.6] [--relief 0.3]
         [--relief-length 3] [--normal-neighbours 20] [--wave 0] [--wave-length 10]
-        [--steps] [--bands] [--true-labels] [--set FIELD=VALUE ...]
+        [--steps] [--bands] [--true-labels] [--floor 1] [--set FIELD=VALUE ...]
 """
 
 from __future__ import annotations
@@ -253,6 +258,13 @@ def main() -> None:
         action='store_true',
         help='after each row, rocks found and mass by band of visible fraction',
     )
+    parser.add_argument(
+        '--floor',
+        type=float,
+        default=1.0,
+        help="smallest rock of interest [the material's smallest b]: over 1, the bed's smaller "
+        'rocks are fines under it, scored as barely visible ones',
+    )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
     args = parser.parse_args()
@@ -274,7 +286,7 @@ def main() -> None:
         for across in args.edges:
             surface = surveyed(placed, material, across, args)
             params = SegmentParams.preset(
-                'default', **{'min_rock_b': lo, 'max_rock_b': hi, **overrides}
+                'default', **{'min_rock_b': args.floor * lo, 'max_rock_b': hi, **overrides}
             )
             steps: list[tuple[str, np.ndarray]] = []
             t0 = time.process_time()
@@ -300,6 +312,7 @@ def main() -> None:
                 seg.geometry.areas,
                 truth,
                 {r.id: SizedRock(r.b, r.mass) for r in rocks},
+                min_b=params.min_rock_b,
             )
             edges = lo / seg.scale.edge
             # Whether a report would say the mesh's floor cuts the sizes (only with no smallest
@@ -321,7 +334,16 @@ def main() -> None:
                   flush=True)  # fmt: skip
             cost.append((len(surface.faces), seconds))
             seen = MatchOptions().visible_threshold
-            visible = [k for k, r in truth.items() if r.visible_fraction >= seen]
+            small = [r for r in truth.values() if r.b < params.min_rock_b]
+            if small:
+                print(f'    fines under the smallest rock of interest ({params.min_rock_b:.3g} m): '
+                      f'{len(small)} rocks, {sum(r.visible_fraction >= seen for r in small)} '
+                      f'of them visible; {s.clusters} reported rocks made of them')  # fmt: skip
+            visible = [
+                k
+                for k, r in truth.items()
+                if r.visible_fraction >= seen and r.b >= params.min_rock_b
+            ]
             if args.bands:
                 found = [k for _, k in s.pairs]
                 bands = by_visibility(surface, seg.labels, seg.geometry.areas, rocks, found)

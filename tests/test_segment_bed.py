@@ -243,3 +243,20 @@ def test_estimated_normals_follow_the_surface_and_face_the_survey() -> None:
     n, _ = estimate_normals(points, points - rays, 20, 0.01)
     assert np.all(np.einsum('ij,ij->i', n, rays) < 0)
     assert np.median(np.einsum('ij,ij->i', n, points)) > np.cos(np.deg2rad(3.0))
+
+
+def test_fines_count_as_barely_seen_rocks_and_their_clusters_as_false() -> None:
+    # Rock 1 is of interest; rocks 2-5 are fines under a smallest rock of b 1.
+    sizes = {1: 2.0, 2: 0.5, 3: 0.5, 4: 0.5, 5: 0.5}
+    truth = {k: SizedRock(b, b**3, 0.8) for k, b in sizes.items()}
+    true_labels = np.array([1, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5])
+    areas = np.ones(11)
+    # Rock 1 found, rock 2 found alone, rocks 3, 4 and 5 taken for one rock.
+    labels = np.array([1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 3])
+    measured = {1: SizedRock(2.0, 8.0), 2: SizedRock(0.5, 0.1), 3: SizedRock(1.0, 1.0)}
+    every = score_labels(true_labels, labels, areas, truth, measured)
+    assert (every.visible, every.found, every.clusters, every.precision) == (5, 2, 0, 2 / 3)
+    fines = score_labels(true_labels, labels, areas, truth, measured, min_b=1.0)
+    assert (fines.visible, fines.found, fines.recall) == (1, 1, 1.0)
+    # The fine found alone counts neither way; the cluster of three counts against precision.
+    assert (fines.clusters, fines.precision) == (1, 0.5)

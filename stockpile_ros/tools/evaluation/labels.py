@@ -9,6 +9,11 @@ missed when undetected nor counted against precision when found, whole or in pie
 (``RockMatching.on_hidden``). The true D50 is, as in ``evaluate`` (``truth.json``'s gradation),
 that of every true rock, the reported one that of every reported rock; the D50 of the visible
 true rocks is given beside it.
+
+Where the smallest rock of interest lies above a bed's smallest rocks (``min_b``: a gravel bar's
+fines under what its mesh resolves), the rocks under it are treated as the barely visible ones
+are: neither missed nor, found alone, counted either way. A reported rock made of several of
+them is a false rock, and is counted apart (``clusters``).
 """
 
 from __future__ import annotations
@@ -55,6 +60,8 @@ class LabelScore:
         recall: ``found / visible``.
         precision: ``found`` over the reported rocks not about a less visible rock.
         merges: Reported rocks holding most of two or more true rocks.
+        clusters: Reported rocks not about one true rock that lie mostly (``major_share`` of
+            their area) on true rocks under ``min_b``: several small rocks taken for one.
         splits: True rocks cut into two or more reported rocks.
         b_error: Median of ``|b / b_true - 1|`` over the found rocks.
         b_bias: Median of ``b / b_true - 1`` over the found rocks.
@@ -74,6 +81,7 @@ class LabelScore:
     recall: float
     precision: float
     merges: int
+    clusters: int
     splits: int
     b_error: float
     b_bias: float
@@ -97,6 +105,7 @@ def score_labels(
     truth: Mapping[int, SizedRock],
     measured: Mapping[int, SizedRock],
     options: MatchOptions | None = None,
+    min_b: float = 0.0,
 ) -> LabelScore:
     """Match the measured rocks to the true ones on shared faces and score them.
 
@@ -107,6 +116,8 @@ def score_labels(
         truth: Every true rock by id.
         measured: The reported rocks by segment id.
         options: Matching thresholds (``evaluate``'s defaults when None).
+        min_b: The smallest rock of interest [m]: true rocks under it count as barely visible
+            ones do, and reported rocks made of several of them as ``clusters``.
 
     """
     opt = options or MatchOptions()
@@ -115,9 +126,20 @@ def score_labels(
     transfer = LabelTransfer(np.arange(len(t)), t, np.zeros(len(t)), a)
     result_ids, true_ids = sorted(measured), sorted(truth)
     matching = match_rocks(labels, transfer, result_ids, true_ids, opt)
-    visible = {k for k, r in truth.items() if r.visible_fraction >= opt.visible_threshold}
+    visible = {
+        k for k, r in truth.items() if r.visible_fraction >= opt.visible_threshold and r.b >= min_b
+    }
     found = [(r, k) for r, k, _ in matching.pairs if k in visible]
     about_hidden = matching.on_hidden(set(truth) - visible, opt.major_share)
+    small = [j for j, k in enumerate(matching.true_ids) if truth[k].b < min_b]
+    on_small = matching.overlap[:, small].sum(axis=1)
+    clusters = [
+        rid
+        for i, rid in enumerate(matching.result_ids)
+        if rid not in about_hidden
+        and matching.result_area[i] > 0
+        and on_small[i] >= opt.major_share * matching.result_area[i]
+    ]
     rel = np.array([measured[r].b / truth[k].b - 1.0 for r, k in found])
     d50_true = _d50(list(truth.values()))
     d50_visible = _d50([truth[k] for k in visible])
@@ -130,6 +152,7 @@ def score_labels(
         recall=len(found) / len(visible) if visible else float('nan'),
         precision=len(found) / counted if counted else float('nan'),
         merges=len(matching.merges),
+        clusters=len(clusters),
         splits=len(matching.splits),
         b_error=float(np.median(np.abs(rel))) if len(rel) else float('nan'),
         b_bias=float(np.median(rel)) if len(rel) else float('nan'),
