@@ -63,14 +63,30 @@ def test_two_touching_rocks_in_one_region_are_split_at_the_crease() -> None:
     ('depth', 'min_part'),
     [
         (0.04, 0.005),  # the crease (28 mm under the tops) is shallower than that
-        (0.001, 0.04),  # each rock shows under 0.04 m2: no two parts that large
+        (0.001, 0.05),  # the region (0.047 m2) is smaller than a part must be
     ],
 )
-def test_a_crease_too_shallow_or_parts_too_small_leave_the_region_whole(
+def test_a_crease_too_shallow_or_a_region_too_small_leave_the_region_whole(
     depth: float, min_part: float
 ) -> None:
     out, labels, _ = _split(_two_caps, depth, min_part)
     assert np.array_equal(out, labels)
+
+
+def test_rocks_each_smaller_than_a_part_taken_for_one_are_no_rock() -> None:
+    # Each rock shows under 0.04 m2, the region over it: fines under the smallest rock of
+    # interest, taken for one rock of its size.
+    out, labels, _ = _split(_two_caps, depth=0.001, min_part=0.04)
+    assert labels.any() and not out.any()
+
+
+def test_a_rock_with_a_smaller_one_beside_it_stays_one_region() -> None:
+    # The region shows 0.027 m2; no part reaches 0.022 m2 either, but the rock holds most of it.
+    def rock_and_pebble(x: F64, y: F64) -> F64:
+        return np.maximum(_cap(x, y, -0.03), _cap(x, y, 0.1, r=0.03, h=0.02))
+
+    out, labels, _ = _split(rock_and_pebble, depth=0.001, min_part=0.022)
+    assert labels.any() and np.array_equal(out, labels)
 
 
 def test_one_convex_rock_lies_on_its_hull_and_stays_whole() -> None:

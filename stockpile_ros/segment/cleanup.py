@@ -20,6 +20,7 @@ from .adjacency import FaceAdjacency, FaceGeometry
 __all__ = [
     'BORDER_SAMPLES',
     'HULL_SAMPLES',
+    'ONE_ROCK_SHARE',
     'drop_facing_down',
     'drop_unanchored',
     'hand_back',
@@ -44,6 +45,11 @@ HULL_SAMPLES = 500
 
 # Faces per block of the faces-by-facets products in ``split_under_hulls``.
 HULL_CHUNK = 4096
+
+#: Least share of a region's surface its largest part must hold, in ``split_under_hulls``, for a
+#: region cut into parts smaller than the smallest rock of interest to be one rock: a rock dented
+#: by its own hollows keeps most of its surface in one part, fines taken for one rock do not.
+ONE_ROCK_SHARE = 0.5
 
 
 def region_bounds(labels: I32) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -320,13 +326,17 @@ def split_under_hulls(
     """Split each region that a band of faces deep under its own convex hull cuts into parts.
 
     One convex rock's surface lies on its hull; where two touching rocks share a region, the
-    crease between them lies under the hull of the pair. Each region of at least two parts' area
-    is taken apart at its faces deeper than ``max_depth`` under the hull of its vertices (the
-    distance to the nearest facet's plane); where the rest falls into two or more parts of at
-    least ``min_part`` area each, those become regions (see ``split_into_parts``). The hull is
-    that of the corners of an even stride of its faces, and a region is looked into where one
-    of an even stride of ``BORDER_SAMPLES`` of its faces is that deep (a band that cuts a region
-    is many faces long).
+    crease between them lies under the hull of the pair. Each region of at least ``min_part``
+    area is taken apart at its faces deeper than ``max_depth`` under the hull of its vertices
+    (the distance to the nearest facet's plane); where the rest falls into two or more parts of
+    at least ``min_part`` area each, those become regions (see ``split_into_parts``). Where no
+    part is that large and the largest holds under ``ONE_ROCK_SHARE`` of the region's surface
+    (``outside`` faces aside), the region is several rocks smaller than the smallest of interest
+    taken for one (fines under it, or the slivers of buried rocks) and gets label 0: parts that
+    small are not rocks to report, and together they are no rock at all. The hull is that of
+    the corners of an even stride of its faces, and a region is looked into where one of an even
+    stride of ``BORDER_SAMPLES`` of its faces is that deep (a band that cuts a region is many
+    faces long).
 
     Args:
         vertices: Nx3 vertex positions.
@@ -340,14 +350,15 @@ def split_under_hulls(
             faces handed back to the regions).
 
     Returns:
-        The labels, each split region's parts numbered after every existing id.
+        The labels, each split region's parts numbered after every existing id and each region
+        of small parts alone cleared.
 
     """
     area = np.bincount(labels, weights=geom.areas)
     solid = ~outside
     cut = np.zeros(len(area), dtype=bool)
     order, bounds = region_bounds(labels)
-    for region in np.flatnonzero(area[1:] >= 2 * min_part) + 1:
+    for region in np.flatnonzero(area[1:] >= min_part) + 1:
         idx = order[bounds[region] : bounds[region + 1]]
         idx = idx[solid[idx]]
         if not len(idx):
@@ -370,8 +381,20 @@ def split_under_hulls(
     if not cut.any():
         return labels
     # Only the regions with a deep band hold solid faces to part: the others are left as they are.
+    parted = solid & cut[labels]
+    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
+    n, part = _parts(adj, parted, same)
+    faces_in = np.flatnonzero(parted)
+    owner = np.zeros(n, dtype=np.int64)
+    owner[part] = labels[faces_in]
+    largest = np.zeros(len(area))
+    np.maximum.at(largest, owner, np.bincount(part, weights=geom.areas[faces_in], minlength=n))
+    surface = np.bincount(labels[~outside], weights=geom.areas[~outside], minlength=len(area))
+    small = cut & (largest < min_part) & (largest < ONE_ROCK_SHARE * surface)
+    small[0] = False
+    labels = np.where(small[labels], 0, labels).astype(np.int32)
     return split_into_parts(
-        labels, adj, geom.areas, solid & cut[labels], np.full(len(area), min_part)
+        labels, adj, geom.areas, parted & ~small[labels], np.full(len(area), min_part)
     )
 
 
