@@ -36,6 +36,7 @@ __all__ = [
 
 F64 = npt.NDArray[np.float64]
 I32 = npt.NDArray[np.int32]
+I64 = npt.NDArray[np.int64]
 
 
 BORDER_SAMPLES = 256
@@ -218,6 +219,29 @@ def drop_unanchored(labels: I32, loose: npt.NDArray[np.bool_]) -> I32:
     return np.where(anchored[labels], labels, 0).astype(np.int32)
 
 
+def _region_parts(
+    labels: I32, adj: FaceAdjacency, areas: F64, solid: npt.NDArray[np.bool_]
+) -> tuple[npt.NDArray[np.bool_], I64, I64, I64, F64]:
+    """Find the connected parts of each region's ``solid`` faces.
+
+    Returns:
+        Per edge of ``adj`` whether it lies inside a region; the solid faces; each one's part;
+        each part's region and area.
+
+    """
+    same: npt.NDArray[np.bool_] = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
+    solid = solid & (labels > 0)
+    faces = np.flatnonzero(solid).astype(np.int64)
+    if not len(faces):
+        empty = np.zeros(0, dtype=np.int64)
+        return same, faces, empty, empty, np.zeros(0)
+    n, part = _parts(adj, solid, same)
+    owner = np.zeros(n, dtype=np.int64)
+    owner[part] = labels[faces]
+    area = np.bincount(part, weights=areas[faces], minlength=n).astype(np.float64)
+    return same, faces, part, owner, area
+
+
 def split_into_parts(
     labels: I32, adj: FaceAdjacency, areas: F64, solid: npt.NDArray[np.bool_], least: F64
 ) -> I32:
@@ -240,15 +264,11 @@ def split_into_parts(
 
     """
     m = len(labels)
-    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
-    solid = solid & (labels > 0)
-    faces = np.flatnonzero(solid)
+    same, faces, part, owner, part_area = _region_parts(labels, adj, areas, solid)
     if not len(faces):
         return labels
-    n, part = _parts(adj, solid, same)
-    owner = np.zeros(n, dtype=np.int64)
-    owner[part] = labels[faces]
-    big = np.bincount(part, weights=areas[faces], minlength=n) >= least[owner]
+    n = len(owner)
+    big = part_area >= least[owner]
     split = np.bincount(owner[big], minlength=len(least)) >= 2
     split[0] = False
     if not split.any():
@@ -382,13 +402,9 @@ def split_under_hulls(
         return labels
     # Only the regions with a deep band hold solid faces to part: the others are left as they are.
     parted = solid & cut[labels]
-    same = (labels[adj.i] == labels[adj.j]) & (labels[adj.i] > 0)
-    n, part = _parts(adj, parted, same)
-    faces_in = np.flatnonzero(parted)
-    owner = np.zeros(n, dtype=np.int64)
-    owner[part] = labels[faces_in]
+    _, _, _, owner, part_area = _region_parts(labels, adj, geom.areas, parted)
     largest = np.zeros(len(area))
-    np.maximum.at(largest, owner, np.bincount(part, weights=geom.areas[faces_in], minlength=n))
+    np.maximum.at(largest, owner, part_area)
     surface = np.bincount(labels[~outside], weights=geom.areas[~outside], minlength=len(area))
     small = cut & (largest < min_part) & (largest < ONE_ROCK_SHARE * surface)
     small[0] = False
