@@ -80,13 +80,18 @@ def test_rocks_each_smaller_than_a_part_taken_for_one_are_no_rock() -> None:
     assert labels.any() and not out.any()
 
 
-def test_a_rock_with_a_smaller_one_beside_it_stays_one_region() -> None:
-    # The region shows 0.027 m2; no part reaches 0.022 m2 either, but the rock holds most of it.
+@pytest.mark.parametrize(('min_part', 'kept'), [(0.018, True), (0.022, False)])
+def test_a_region_stays_whole_where_one_of_its_parts_is_a_rock_of_interest(
+    min_part: float, kept: bool
+) -> None:
+    # A rock with a pebble beside it, 0.027 m2 together: the rock's part reaches 0.018 m2, not
+    # 0.022 m2, and the pebble's neither.
     def rock_and_pebble(x: F64, y: F64) -> F64:
         return np.maximum(_cap(x, y, -0.03), _cap(x, y, 0.1, r=0.03, h=0.02))
 
-    out, labels, _ = _split(rock_and_pebble, depth=0.001, min_part=0.022)
-    assert labels.any() and np.array_equal(out, labels)
+    out, labels, _ = _split(rock_and_pebble, depth=0.001, min_part=min_part)
+    assert labels.any()
+    assert np.array_equal(out, labels) if kept else not out.any()
 
 
 def test_one_convex_rock_lies_on_its_hull_and_stays_whole() -> None:

@@ -20,7 +20,6 @@ from .adjacency import FaceAdjacency, FaceGeometry
 __all__ = [
     'BORDER_SAMPLES',
     'HULL_SAMPLES',
-    'ONE_ROCK_SHARE',
     'drop_facing_down',
     'drop_unanchored',
     'hand_back',
@@ -46,11 +45,6 @@ HULL_SAMPLES = 500
 
 # Faces per block of the faces-by-facets products in ``split_under_hulls``.
 HULL_CHUNK = 4096
-
-#: Least share of a region's surface its largest part must hold, in ``split_under_hulls``, for a
-#: region cut into parts smaller than the smallest rock of interest to be one rock: a rock dented
-#: by its own hollows keeps most of its surface in one part, fines taken for one rock do not.
-ONE_ROCK_SHARE = 0.5
 
 
 def region_bounds(labels: I32) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -350,10 +344,9 @@ def split_under_hulls(
     area is taken apart at its faces deeper than ``max_depth`` under the hull of its vertices
     (the distance to the nearest facet's plane); where the rest falls into two or more parts of
     at least ``min_part`` area each, those become regions (see ``split_into_parts``). Where no
-    part is that large and the largest holds under ``ONE_ROCK_SHARE`` of the region's surface
-    (``outside`` faces aside), the region is several rocks smaller than the smallest of interest
-    taken for one (fines under it, or the slivers of buried rocks) and gets label 0: parts that
-    small are not rocks to report, and together they are no rock at all. The hull is that of
+    part is that large, the region is several rocks smaller than the smallest of interest taken
+    for one (fines under it, or the slivers of buried rocks) and gets label 0: parts that small
+    are not rocks to report, and together they are no rock at all. The hull is that of
     the corners of an even stride of its faces, and a region is looked into where one of an even
     stride of ``BORDER_SAMPLES`` of its faces is that deep (a band that cuts a region is many
     faces long).
@@ -405,8 +398,7 @@ def split_under_hulls(
     _, _, _, owner, part_area = _region_parts(labels, adj, geom.areas, parted)
     largest = np.zeros(len(area))
     np.maximum.at(largest, owner, part_area)
-    surface = np.bincount(labels[~outside], weights=geom.areas[~outside], minlength=len(area))
-    small = cut & (largest < min_part) & (largest < ONE_ROCK_SHARE * surface)
+    small = cut & (largest < min_part)
     small[0] = False
     labels = np.where(small[labels], 0, labels).astype(np.int32)
     return split_into_parts(
