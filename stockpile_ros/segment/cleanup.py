@@ -213,9 +213,12 @@ def drop_unanchored(labels: I32, loose: npt.NDArray[np.bool_]) -> I32:
     return np.where(anchored[labels], labels, 0).astype(np.int32)
 
 
+RegionParts = tuple[npt.NDArray[np.bool_], I64, I64, I64, F64]
+
+
 def _region_parts(
     labels: I32, adj: FaceAdjacency, areas: F64, solid: npt.NDArray[np.bool_]
-) -> tuple[npt.NDArray[np.bool_], I64, I64, I64, F64]:
+) -> RegionParts:
     """Find the connected parts of each region's ``solid`` faces.
 
     Returns:
@@ -257,8 +260,13 @@ def split_into_parts(
         The labels, each split region's parts numbered after every existing id.
 
     """
+    return _split_parts(labels, adj, _region_parts(labels, adj, areas, solid), least)
+
+
+def _split_parts(labels: I32, adj: FaceAdjacency, parts: RegionParts, least: F64) -> I32:
+    """Split each region with two or more of ``parts`` of ``least`` area (``split_into_parts``)."""
     m = len(labels)
-    same, faces, part, owner, part_area = _region_parts(labels, adj, areas, solid)
+    same, faces, part, owner, part_area = parts
     if not len(faces):
         return labels
     n = len(owner)
@@ -394,16 +402,15 @@ def split_under_hulls(
     if not cut.any():
         return labels
     # Only the regions with a deep band hold solid faces to part: the others are left as they are.
-    parted = solid & cut[labels]
-    _, _, _, owner, part_area = _region_parts(labels, adj, geom.areas, parted)
+    parts = _region_parts(labels, adj, geom.areas, solid & cut[labels])
+    owner, part_area = parts[3], parts[4]
     largest = np.zeros(len(area))
     np.maximum.at(largest, owner, part_area)
     small = cut & (largest < min_part)
     small[0] = False
+    # The parts stay as found: a cleared region holds none of ``min_part``, so none splits.
     labels = np.where(small[labels], 0, labels).astype(np.int32)
-    return split_into_parts(
-        labels, adj, geom.areas, parted & ~small[labels], np.full(len(area), min_part)
-    )
+    return _split_parts(labels, adj, parts, np.full(len(area), min_part))
 
 
 def drop_facing_down(labels: I32, adj: FaceAdjacency, lift: F64) -> I32:
