@@ -66,11 +66,9 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
     t_score = best_of(lambda: edge_scores(g.centroids, g.normals, adj.i, adj.j), repeat)
     fwd, back = edge_scores(g.centroids, g.normals, adj.i, adj.j)
     t = params.threshold
-    src = np.concatenate([adj.i[fwd > t], adj.j[back > t]])
-    dst = np.concatenate([adj.j[fwd > t], adj.i[back > t]])
     seeds = np.arange(len(f))
-    t_grow = best_of(lambda: grow_regions(len(f), src, dst, seeds), repeat)
-    fast = grow_regions(len(f), src, dst, seeds)
+    t_grow = best_of(lambda: grow_regions(adj.across_sides(fwd > t, back > t), seeds), repeat)
+    fast = grow_regions(adj.across_sides(fwd > t, back > t), seeds)
     print(f'paper mode, one core, best of {repeat}: total {total:.2f} s '
           f'(geometry {t_geom:.2f}, adjacency {t_adj:.2f}, Eq. 2 on all edges {t_score:.2f}, '
           f'search {t_grow:.2f}); {fast.max()} regions')  # fmt: skip

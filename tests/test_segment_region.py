@@ -1,7 +1,5 @@
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pytest
 from segment_fixtures import small_pile
@@ -25,9 +23,7 @@ def _both(v: np.ndarray, f: np.ndarray, t: float, seeds: np.ndarray) -> tuple[np
     g = face_geometry(v, f)
     adj = face_adjacency(f)
     fwd, back = edge_scores(g.centroids, g.normals, adj.i, adj.j)
-    src = np.concatenate([adj.i[fwd > t], adj.j[back > t]])
-    dst = np.concatenate([adj.j[fwd > t], adj.i[back > t]])
-    fast = grow_regions(len(f), src, dst, seeds)
+    fast = grow_regions(adj.across_sides(fwd > t, back > t), seeds)
     slow = reference_bfs(g.centroids, g.normals, adj, t, seeds)
     return fast, slow, adj, fwd > t, back > t
 
@@ -60,10 +56,20 @@ def test_partial_seed_list_leaves_unreached_faces_zero() -> None:
 
 
 def test_grow_regions_directed_chain() -> None:
-    # 0 -> 1 -> 2 and 3 -> 2: seed order 3, 0 gives {3, 2} then {0, 1}.
-    src, dst = np.array([0, 1, 3]), np.array([1, 2, 2])
-    labels = grow_regions(4, src, dst, np.array([3, 0, 1, 2]))
+    # 0 -> 1 -> 2 and 3 -> 2 (2 leads nowhere): seed order 3, 0 gives {3, 2} then {0, 1}.
+    targets = np.array([[1], [2], [2], [2]])
+    labels = grow_regions(targets, np.array([3, 0, 1, 2]))
     assert labels.tolist() == [2, 2, 1, 1]
+
+
+def test_across_sides_lays_out_passing_neighbours_by_side() -> None:
+    # Face 1 meets face 0 along its side 0 (vertices 2-1) and face 2 along its side 1 (1-3).
+    f = np.array([[0, 1, 2], [2, 1, 3], [1, 4, 3]])
+    adj = face_adjacency(f)
+    assert adj.sides is not None
+    assert [(int(a), int(b)) for a, b in zip(*adj.sides, strict=True)] == [(1, 3), (4, 8)]
+    table = adj.across_sides(np.array([True, False]), np.array([True, True]))
+    assert table.tolist() == [[0, 1, 0], [0, 1, 1], [2, 2, 1]]
 
 
 def test_adjacency_of_two_triangles() -> None:
@@ -73,15 +79,20 @@ def test_adjacency_of_two_triangles() -> None:
     assert adj.neighbour_count().tolist() == [1, 1, 0]
 
 
-def _adjacency_by_dict(f: np.ndarray) -> list[tuple[int, int]]:
-    """Face pairs in order of their edge (smaller vertex, larger vertex), chained along an edge."""
+def _adjacency_by_dict(f: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Face pairs and their sides in order of their edge (smaller vertex, larger vertex).
+
+    Along an edge the sides are linked two by two in order: a link of one face's two sides
+    (degenerate) is dropped.
+    """
     edges: dict[tuple[int, int], list[int]] = {}
-    for half, (a, b) in enumerate(zip(f.ravel(), f[:, [1, 2, 0]].ravel(), strict=True)):
-        edges.setdefault((min(a, b), max(a, b)), []).append(half // 3)
+    for side, (a, b) in enumerate(zip(f.ravel(), f[:, [1, 2, 0]].ravel(), strict=True)):
+        edges.setdefault((min(a, b), max(a, b)), []).append(side)
     pairs = []
     for key in sorted(edges):
-        chain = edges[key]
-        pairs += [(min(p, q), max(p, q)) for p, q in itertools.pairwise(chain) if p != q]
+        sides = edges[key]
+        links = zip(sides[0::2], sides[1::2], strict=False)
+        pairs += [(p // 3, q // 3, p, q) for p, q in links if p // 3 != q // 3]
     return pairs
 
 
@@ -92,7 +103,9 @@ def test_adjacency_equals_edge_dictionary(seed: int) -> None:
     rng = np.random.default_rng(seed)
     f = rng.integers(0, 7, size=(int(rng.integers(1, 40)), 3))
     adj = face_adjacency(f)
-    assert list(zip(adj.i.tolist(), adj.j.tolist(), strict=True)) == _adjacency_by_dict(f)
+    assert adj.sides is not None
+    got = zip(adj.i.tolist(), adj.j.tolist(), *(s.tolist() for s in adj.sides), strict=True)
+    assert list(got) == _adjacency_by_dict(f)
 
 
 @pytest.mark.parametrize('seed', range(10))

@@ -27,13 +27,13 @@ __all__ = ['grow_regions']
 I64 = npt.NDArray[np.int64]
 
 
-def grow_regions(n_faces: int, src: I64, dst: I64, seeds: I64) -> npt.NDArray[np.int32]:
+def grow_regions(targets: I64, seeds: I64) -> npt.NDArray[np.int32]:
     """Label faces by the first seed that reaches them over directed passing edges.
 
     Args:
-        n_faces: Number of faces.
-        src: Source face of every passing directed edge (current face of Eq. 2).
-        dst: Destination face of every passing directed edge (the neighbour it admits).
+        targets: M x K: row ``f`` lists the faces Eq. 2 admits from ``f`` (``f`` current), ``f``
+            itself in the places of those it does not (see
+            :meth:`~stockpile_ros.segment.adjacency.FaceAdjacency.across_sides`).
         seeds: Faces in the order the search restarts from them; faces left out are never seeds
             and are only reached from seeds (label 0 if none reaches them).
 
@@ -44,22 +44,24 @@ def grow_regions(n_faces: int, src: I64, dst: I64, seeds: I64) -> npt.NDArray[np
         RuntimeError: scipy's search did not discover nodes in the order this relies on.
 
     """
+    n_faces, width = targets.shape
     n_seeds = len(seeds)
     labels = np.zeros(n_faces, dtype=np.int32)
     if n_seeds == 0:
         return labels
     n = n_faces + n_seeds
-    # The faces' rows from the passing edges (float64 weights, the search's own type, so that
-    # scipy takes the graph without a copy); the virtual rows written after them as they are,
-    # each its seed and then the next virtual node, in the order the search must take them.
-    faces_out = sp.csr_matrix((np.ones(len(src)), (src, dst)), shape=(n_faces, n))
-    index = faces_out.indices.dtype
-    chain = np.empty(2 * n_seeds - 1, dtype=index)
-    chain[0::2] = seeds
-    chain[1::2] = n_faces + np.arange(1, n_seeds)
-    ends = faces_out.indptr[-1] + np.minimum(2 * np.arange(1, n_seeds + 1), 2 * n_seeds - 1)
-    indices = np.concatenate([faces_out.indices, chain])
-    indptr = np.concatenate([faces_out.indptr, ends.astype(index)])
+    # Rows of equal length, the faces' first: a face's own place leads to itself, which the
+    # search has visited by then. The virtual rows follow as they are, each its seed and then the
+    # next virtual node, in the order the search must take them.
+    size = width * n_faces
+    index = np.int32 if size + 2 * n_seeds < 2**31 else np.int64
+    indices = np.empty(size + 2 * n_seeds - 1, dtype=index)
+    indices[:size] = targets.ravel()
+    indices[size::2] = seeds
+    indices[size + 1 :: 2] = n_faces + np.arange(1, n_seeds)
+    ends = size + np.minimum(2 * np.arange(1, n_seeds + 1), 2 * n_seeds - 1)
+    indptr = np.concatenate([np.arange(0, size + 1, width), ends]).astype(index)
+    # float64 weights, the search's own type, so that scipy takes the graph without a copy.
     graph = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     found = np.asarray(
         depth_first_order(graph, n_faces, directed=True, return_predecessors=False),

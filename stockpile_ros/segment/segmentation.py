@@ -174,7 +174,8 @@ def _restricted(
     if keep.all():
         return adj, np.ones(len(adj.i), dtype=bool)
     both = keep[adj.i] & keep[adj.j]
-    return FaceAdjacency(len(keep), adj.i[both], adj.j[both]), both
+    sides = None if adj.sides is None else (adj.sides[0][both], adj.sides[1][both])
+    return FaceAdjacency(len(keep), adj.i[both], adj.j[both], sides=sides), both
 
 
 def _search(
@@ -203,9 +204,7 @@ def _search(
         count = search.neighbour_count()
         convexity = np.where(count > 0, total / np.maximum(count, 1), -np.inf)
         seeds = _most_convex_first(convexity, np.flatnonzero(within))
-    src = np.concatenate([search.i[pass_ij], search.j[pass_ji]])
-    dst = np.concatenate([search.j[pass_ij], search.i[pass_ji]])
-    return grow_regions(m, src, dst, seeds), pass_ij, pass_ji
+    return grow_regions(search.across_sides(pass_ij, pass_ji), seeds), pass_ij, pass_ji
 
 
 def _no_step(name: str, labels: I32) -> None:
@@ -273,7 +272,8 @@ def segment_mesh(
     raw = int(labels.max()) if m else 0
     min_area = p.min_region_share * np.pi / 4.0 * scale.min_rock_b**2
     loose = np.zeros(m, dtype=bool)
-    degree = adj.neighbour_count()
+    # Paper mode merges nothing and needs no degrees.
+    degree = adj.neighbour_count() if min_area > 0 else None
 
     def merge(regions: I32, within: FaceAdjacency) -> I32:
         return merge_fragments(
