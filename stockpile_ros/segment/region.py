@@ -61,8 +61,9 @@ def grow_regions(targets: I64, seeds: I64) -> npt.NDArray[np.int32]:
     indices[size + 1 :: 2] = n_faces + np.arange(1, n_seeds)
     ends = size + np.minimum(2 * np.arange(1, n_seeds + 1), 2 * n_seeds - 1)
     indptr = np.concatenate([np.arange(0, size + 1, width), ends]).astype(index)
-    # float64 weights, the search's own type, so that scipy takes the graph without a copy.
-    graph = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
+    # The search reads no weights: one float64 (scipy's own type, so no copy) seen as all of them.
+    weights = np.broadcast_to(np.float64(1.0), indices.shape)
+    graph = sp.csr_matrix((weights, indices, indptr), shape=(n, n))
     found = np.asarray(
         depth_first_order(graph, n_faces, directed=True, return_predecessors=False),
         dtype=np.int64,
