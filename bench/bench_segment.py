@@ -5,12 +5,19 @@
 2. Quality: mean rock recall / precision of ``paper`` and ``default`` modes against the known
    labels, and per-rock errors of b and volume, on synthetic piles or on the simulator's scene.ply.
 
+3. With ``--against REV``: ``segment_mesh`` of this code and of commit REV (the code the speed
+   targets were set against is the parent of 4ac1a14) on the synthetic pile, alternated in this
+   one process ``--runs`` times per mode, best and median of each and their ratios, and how many
+   faces of paper mode's regions moved between the two. This machine's speed moves by more than
+   the targets' margins from hour to hour, so only ratios taken in one run compare.
+
 Times are CPU seconds of this process (``time.process_time``): on one thread they are the wall
 time of an idle machine, and other work sharing the cores does not inflate them.
 
 Usage:
     .venv/bin/python bench/bench_segment.py                       # synthetic pile
     .venv/bin/python bench/bench_segment.py --scene SIM_truth     # simulator truth folder(s)
+    .venv/bin/python bench/bench_segment.py --against 4ac1a14^    # speed-up against a commit
 """
 
 from __future__ import annotations
@@ -21,7 +28,12 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = '1'
 
 import argparse  # noqa: E402
+import importlib  # noqa: E402
 import json  # noqa: E402
+import re  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -103,6 +115,63 @@ def speed(v: np.ndarray, f: np.ndarray, repeat: int, reference: bool) -> None:
               f'{t_ref / total:.1f}x; labels identical: {np.array_equal(fast, slow)}')  # fmt: skip
 
 
+def older_code(rev: str, folder: Path):
+    """Return ``segment_mesh`` and ``SegmentParams`` of commit ``rev``, importable beside ours.
+
+    The package at ``rev`` is written under ``folder`` as ``stockpile_ros_then`` (its own
+    imports renamed), so that both run in this process on the same mesh.
+    """
+    root = Path(__file__).resolve().parents[1]
+    name = 'stockpile_ros_then'
+    archive = subprocess.run(
+        ['git', 'archive', '--format=tar', rev, 'stockpile_ros'], cwd=root, capture_output=True,
+        check=True,
+    ).stdout  # fmt: skip
+    subprocess.run(['tar', '-x', '-C', str(folder)], input=archive, check=True)
+    package = folder / name
+    (folder / 'stockpile_ros').rename(package)
+    for source in package.rglob('*.py'):
+        source.write_text(re.sub(r'\bstockpile_ros\b', name, source.read_text()))
+    sys.path.insert(0, str(folder))
+    segmentation = importlib.import_module(f'{name}.segment.segmentation')
+    try:
+        params = importlib.import_module(f'{name}.segment.params').SegmentParams
+    except ModuleNotFoundError:  # before the parameters had a module of their own
+        params = segmentation.SegmentParams
+    return segmentation.segment_mesh, params
+
+
+def faces_moved(a: np.ndarray, b: np.ndarray) -> int:
+    """Count the faces outside the pairs of regions of ``a`` and ``b`` that overlap most."""
+    pair, count = np.unique(np.stack([a, b]), axis=1, return_counts=True)
+    best_a = np.zeros(int(a.max()) + 1, dtype=np.int64)
+    best_b = np.zeros(int(b.max()) + 1, dtype=np.int64)
+    np.maximum.at(best_a, pair[0], count)
+    np.maximum.at(best_b, pair[1], count)
+    mutual = (count == best_a[pair[0]]) & (count == best_b[pair[1]])
+    return int(count[~mutual].sum())
+
+
+def against(v: np.ndarray, f: np.ndarray, rev: str, runs: int) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        old_segment, old_params = older_code(rev, Path(folder))
+        for mode in ('paper', 'default'):
+            new_p, old_p = SegmentParams.preset(mode), old_params.preset(mode)
+            labels = segment_mesh(v, f, new_p).labels, old_segment(v, f, old_p).labels
+            times: tuple[list[float], list[float]] = ([], [])
+            for _ in range(runs):
+                for k, (segment, p) in enumerate(((segment_mesh, new_p), (old_segment, old_p))):
+                    t = time.process_time()
+                    segment(v, f, p)
+                    times[k].append(time.process_time() - t)
+            new, old = (np.array(x) for x in times)
+            print(f'{mode} mode against {rev}, {runs} alternated runs: best {new.min():.3f} s '
+                  f'against {old.min():.3f} s ({old.min() / new.min():.2f} times), median '
+                  f'{np.median(new):.3f} s against {np.median(old):.3f} s '
+                  f'({np.median(old) / np.median(new):.2f} times); {labels[0].max()} regions '
+                  f'against {labels[1].max()}, {faces_moved(*labels)} faces moved')  # fmt: skip
+
+
 def quality(name: str, v, f, points, point_labels, truth_rocks: dict | None) -> None:
     g = face_geometry(v, f)
     truth = truth_face_labels(g.centroids, points, point_labels)
@@ -135,10 +204,15 @@ def main() -> None:
     parser.add_argument('--noise', type=float, default=0.0, help='point noise [m]')
     parser.add_argument('--repeat', type=int, default=3)
     parser.add_argument('--no-reference', action='store_true')
+    parser.add_argument('--against', metavar='REV', help='time against this commit alone')
+    parser.add_argument('--runs', type=int, default=20, help='alternated runs with --against')
     args = parser.parse_args()
     if not args.scene:
         pile = make_pile(24, seed=22, spread=0.25, density=40000, noise=args.noise)
         v, f = poisson_mesh(pile.points, pile.normals, depth=args.depth)
+        if args.against:
+            against(v, f, args.against, args.runs)
+            return
         truth = {k + 1: {'b': 2 * float(np.sort(r.semi_axes)[1]), 'volume': r.volume()}
                  for k, r in enumerate(pile.rocks)}  # fmt: skip
         speed(v, f, args.repeat, not args.no_reference)
