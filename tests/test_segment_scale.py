@@ -224,6 +224,33 @@ def test_sizes_cut_by_the_mesh_floor_are_warned_about() -> None:
     assert not any('do not fall off' in w for w in analyse_mesh(*_bumps(6, 64)).report.warnings)
 
 
+def test_a_group_of_sizes_near_the_floor_apart_from_the_rest_is_warned_about() -> None:
+    b0 = 0.1
+    scale = rock_scale(SegmentParams(), b0 / SegmentParams().min_rock_edges)
+
+    def sizes(*counts: int) -> list[float]:
+        # counts[k] rocks in the k-th band of a factor sqrt 2 from b0 up, at its middle.
+        return [b0 * 2 ** ((k + 0.5) / 2) for k, n in enumerate(counts) for _ in range(n)]
+
+    # bench/bench_cloud.py's riprap bed scanned at 7 mm: pieces near the floor, a gap, the rocks.
+    (text,) = truncation_warnings(scale, sizes(36, 29, 11, 20, 45, 12, 5), 'm')
+    assert text.startswith('The sizes come in two groups: 65 of 158 rocks measure b under 0.2 m')
+    assert 'and 82 from 0.283 m up, with 11 between (36 and 45 in the fullest band' in text
+    assert '(segment.min_rock_b: 0.283 m, where the larger group begins' in text
+    # A pile falling off from the floor, or rising from it to its own smallest rocks: one group.
+    assert truncation_warnings(scale, sizes(30, 25, 20, 12, 6, 2), 'm') == []
+    assert truncation_warnings(scale, sizes(39, 107, 46, 11, 4), 'm') == []
+    # A gap within the draw of its neighbours' counts, or groups too small to tell, is none.
+    assert truncation_warnings(scale, sizes(36, 29, 30, 28, 45, 12, 5), 'm') == []
+    assert truncation_warnings(scale, sizes(9, 3, 0, 9, 20), 'm') == []
+    assert truncation_warnings(scale, sizes(12, 3, 0, 10, 20), 'm')
+    # A group apart from the floor says nothing of it: a pile of two sizes well above it.
+    assert truncation_warnings(scale, sizes(0, 0, 0, 30, 5, 40), 'm') == []
+    # A smallest rock given is what was asked for.
+    given = rock_scale(SegmentParams(min_rock_b=b0), scale.edge)
+    assert truncation_warnings(given, sizes(36, 29, 11, 20, 45, 12, 5), 'm') == []
+
+
 def test_fragments_are_judged_by_area_not_by_face_count() -> None:
     # A strip of 10 faces: region 1 is 6 small faces (area 0.6), region 2 is 4 large ones (4.0).
     adj = FaceAdjacency(10, np.arange(9), np.arange(1, 10))
