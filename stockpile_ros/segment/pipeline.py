@@ -174,11 +174,13 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
     group above it (``_size_gap``), the warning says so: a pile's rocks grow fewer with size
     from its smallest up, and a group near the floor apart from the rest is most likely pieces of
     the larger rocks (on bench/bench_cloud.py's riprap bed, 100 rocks of b 0.3-0.8 m scanned at
-    7 mm, the reported sizes in bands from the floor of 6.9 cm ran 36, 29, 11, 20, 45, 12, 5, and
-    70 of the 158 rocks reported were false, 61 of them pieces of found rocks; at 1.2 cm 20, 11,
-    44, 17, 8, 3 and 19 false of 103; its gravel bars and piles fall off or rise steadily), or
-    else a gap-graded pile. It names where the fuller group begins: given as the smallest rock
-    there (0.196 m), the 7 mm scan reported 89 rocks, 5 of them false.
+    7 mm, with the normals of 2026-12-06 the reported sizes in bands from the floor of 6.9 cm ran
+    36, 29, 11, 20, 45, 12, 5, and 61 of the 158 rocks reported were pieces of rocks found; with
+    those turned as now 21-24, 15-16, 13-14, 22-25, 37-39, 13-15, 5-6 and 30 of the 129 from
+    the PLY, warned of on two of the three files; its gravel bars and piles fall off or rise
+    steadily), or else a gap-graded pile. It names where the fuller group begins: given as the
+    smallest rock there (0.196 m), the 7 mm scan reported 89 rocks, 5 of them false (the normals
+    of 2026-12-06).
 
     Args:
         scale: The segmentation's scale (``Segmentation.scale``).
@@ -225,7 +227,7 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
         'Rocks near the smallest resolved with few a little larger are most likely pieces of '
         'the larger rocks, cut along their own dents or where their surface was drawn facing '
         'the wrong way (a cloud far finer than its rocks: on a simulated riprap bed of rocks of '
-        'b 0.3-0.8 m scanned at 7 mm, 61 of the 158 rocks reported), or else the pile holds two '
+        'b 0.3-0.8 m scanned at 7 mm, 30 of the 129 rocks reported), or else the pile holds two '
         'separate sizes; its gradation mixes them. Give the smallest rock that matters '
         f'(segment.min_rock_b: {between[1]:.3g} {units}, where the larger group begins, if the '
         'smaller are pieces of them; or a class to check).'
