@@ -20,7 +20,7 @@ def _plane(z: float, half: float = 0.5, step: float = 0.01) -> np.ndarray:
 def test_a_sheet_hides_what_lies_under_it() -> None:
     top, bottom = _plane(0.1), _plane(0.0)
     points = np.vstack([top, bottom])
-    # Normals of either side: the test needs none.
+    # Normals of either side: the test reads their planes, not their sides.
     normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
     normals[::2] *= -1
     down = seen_along(points, normals, np.array([0.0, 0.0, 1.0]), 0.015, 0.01)
