@@ -14,12 +14,14 @@ with ``--rounding`` their edges are worn round as a river's, ``--gradation`` set
 gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m, a few hundred grains) is
 ``--bed --rounding 0.3 --gradation 0.1:0.4 --rocks 400 --spacing 0.01``. With ``--falloff 2``
 the points thin out with range as a scanner's do (``--spacing`` is then the spacing nearest a
-scanner); with ``--aspect 4`` they lie in rows four times farther apart across than along.
+scanner); with ``--aspect 4`` they lie in rows four times farther apart across than along; with
+``--no-overhead`` only the ring of tripods scans, at a glancing angle; ``--flat`` sets the share
+of flat rocks. ``--formats ply`` runs one file of the three (a dense cloud takes minutes each).
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
-        [--bed] [--rounding R] [--falloff P] [--aspect A] [--cache DIR]
-        [--set NAME=VALUE ...]
+        [--bed] [--rounding R] [--falloff P] [--aspect A] [--flat F] [--no-overhead]
+        [--formats ply xyz laz] [--cache DIR] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -58,12 +60,14 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
             return loaded
     grading = parse_gradation(args.gradation)
     scene: PileConfig | BedConfig
+    shares = {} if args.flat is None else {'flat_fraction': args.flat}
     if args.bed:
-        scene = BedConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
+        scene = BedConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding, **shares)
     else:
-        scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding)
+        scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding, **shares)
     made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
-                           falloff=args.falloff, aspect=args.aspect)  # fmt: skip
+                           falloff=args.falloff, aspect=args.aspect,
+                           overhead=args.overhead)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -95,6 +99,13 @@ def run() -> None:
                         help='scan lines: spacing across them over spacing along')  # fmt: skip
     parser.add_argument('--falloff', type=float, default=0.0,
                         help='density falling as range to this power (2: a scanner)')  # fmt: skip
+    parser.add_argument('--flat', type=float,
+                        help='share of flat rocks (c about 0.38 b), lying mostly flat')  # fmt: skip
+    parser.add_argument('--no-overhead', dest='overhead', action='store_false',
+                        help='scanned from the ring of tripods alone, none above')  # fmt: skip
+    parser.add_argument('--formats', nargs='+', default=['ply', 'xyz', 'laz'],
+                        choices=['ply', 'xyz', 'laz'],
+                        help='files to run (a dense cloud: one)')  # fmt: skip
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                         help="passed to stockpile segment's --set")  # fmt: skip
@@ -108,6 +119,10 @@ def run() -> None:
         folder = folder.with_name(f'{folder.name}_falloff{args.falloff:g}')
     if args.aspect != 1.0:
         folder = folder.with_name(f'{folder.name}_aspect{args.aspect:g}')
+    if args.flat is not None:
+        folder = folder.with_name(f'{folder.name}_flat{args.flat:g}')
+    if not args.overhead:
+        folder = folder.with_name(f'{folder.name}_ring')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)
@@ -116,6 +131,8 @@ def run() -> None:
     print(f'{"file":<12} {"MB":>6} {"to report s":>12} {"read+mesh s":>12} {"rocks":>6} '
           f'{"recall":>7} {"precision":>9} {"|b| err %":>9} {"D50 err %":>9}')  # fmt: skip
     for path, flags in write_files(s, folder):
+        if path.suffix[1:] not in args.formats:
+            continue
         out = folder / f'result_{path.suffix[1:]}'
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.perf_counter()

@@ -257,6 +257,22 @@ def test_a_scanner_survey_thins_out_with_range(survey, tmp_path) -> None:  # typ
     assert hi > 1.5 * lo
 
 
+def test_a_survey_from_the_tripods_alone_sees_less_of_each_rock(survey, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    _, above = survey
+    pile = PileConfig(rocks=30, gradation=parse_gradation('0.12:0.3'))
+    s = simulate_survey(tmp_path / 'truth', pile, seed=1, spacing=0.01, noise=0.002,
+                        overhead=False)  # fmt: skip
+    assert s.truth['scene']['survey']['overhead'] is False
+    seen = np.array([r['visible_fraction'] for r in s.truth['rocks']])
+    seen_above = np.array([r['visible_fraction'] for r in above.truth['rocks']])
+    # The same rocks; none better seen without the view from above, and the tops of rocks
+    # hidden behind others lost (on a heap of 30 the ring sees nearly all the rest).
+    assert [r['b'] for r in s.truth['rocks']] == [r['b'] for r in above.truth['rocks']]
+    assert np.all(seen <= seen_above + 0.01)
+    assert np.sum(seen < seen_above - 0.02) >= 3
+    assert len(s.points) < len(above.points)
+
+
 def test_which_side_is_up_without_normals(survey) -> None:  # type: ignore[no-untyped-def]
     _, s = survey
     truth = s.survey_to_pile.rotation.T @ np.array([0.0, 0.0, 1.0])

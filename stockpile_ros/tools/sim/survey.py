@@ -74,6 +74,7 @@ def simulate_survey(
     noise: float = 0.002,
     falloff: float = 0.0,
     aspect: float = 1.0,
+    overhead: bool = True,
     tilt_deg: float = 10.0,
     offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
 ) -> Survey:
@@ -92,6 +93,9 @@ def simulate_survey(
         aspect: The cells one point is kept from are this many times longer along the pile's y
             than along x and z: rows swept densely along x, far apart across them, as a
             scanner's rows at a glancing angle or a cart's LiDAR's rings are (1: even).
+        overhead: Whether a scanner position above the middle sees the pile too (as a drone or
+            a mast would); without it only the ring of tripods 1.5 m high sees it, at a glancing
+            angle, and every rock shadows the ground and the rocks behind it.
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
 
@@ -104,7 +108,8 @@ def simulate_survey(
     ring = np.radians(np.arange(0.0, 360.0, 45.0))
     eyes = np.column_stack([2.5 * reach * np.cos(ring), 2.5 * reach * np.sin(ring),
                             np.full(len(ring), 1.5)])  # fmt: skip
-    eyes = np.vstack([eyes, [[0.0, 0.0, 3.0 * reach]]])
+    if overhead:
+        eyes = np.vstack([eyes, [[0.0, 0.0, 3.0 * reach]]])
     density = _OVERSAMPLE / spacing**2
     dense = sample_scene(scene.vertices, scene.faces, scene.labels, density, margin=0.3,
                          seed=seed, viewpoints=eyes)  # fmt: skip
@@ -131,7 +136,7 @@ def simulate_survey(
         'frame_id': 'pile',
         'seed': seed,
         'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
-                             'aspect': aspect, 'tilt_deg': tilt_deg,
+                             'aspect': aspect, 'overhead': overhead, 'tilt_deg': tilt_deg,
                              'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
                              'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
