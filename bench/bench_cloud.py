@@ -43,8 +43,8 @@ import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 
 from stockpile_ros.cli import main  # noqa: E402
-from stockpile_ros.cloud import CloudOptions, mesh_cloud, read_cloud  # noqa: E402
-from stockpile_ros.recon.surface import PoissonOptions  # noqa: E402
+from stockpile_ros.cloud import mesh_cloud, read_cloud  # noqa: E402
+from stockpile_ros.settings import build_settings, get_setting, smallest_rock_asked  # noqa: E402
 from stockpile_ros.tools.sim.bed import BedConfig  # noqa: E402
 from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation  # noqa: E402
 from stockpile_ros.tools.sim.survey import Survey, score_survey, simulate_survey  # noqa: E402
@@ -111,6 +111,9 @@ def run() -> None:
                         help="passed to stockpile segment's --set")  # fmt: skip
     args = parser.parse_args()
     overrides = [flag for item in args.set for flag in ('--set', item)]
+    # The meshing timed on its own is the run's: the same cloud and Poisson settings.
+    pairs = [item.split('=', 1) for item in args.set]
+    settings = build_settings({name: get_setting(name).parse(text) for name, text in pairs})
     folder = args.cache / f'{args.rocks}_{args.spacing:g}'
     if args.bed or args.rounding or args.gradation != '0.1:0.35':
         kind = 'bed' if args.bed else 'pile'
@@ -140,7 +143,8 @@ def run() -> None:
         total = time.perf_counter() - t0
         t1 = time.perf_counter()
         cloud = read_cloud(path)
-        mesh_cloud(cloud, CloudOptions(), PoissonOptions(), 1.0, 'given')
+        mesh_cloud(cloud, settings.cloud, settings.recon.poisson, 1.0, 'given',
+                   min_rock_b=smallest_rock_asked(settings))  # fmt: skip
         meshing = time.perf_counter() - t1
         scores = score_survey(out, folder / 'truth', s)
         d = scores['detection']

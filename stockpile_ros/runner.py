@@ -28,7 +28,7 @@ from .segment.pipeline import Analysis, analyse_mesh
 from .segment.provenance import Provenance
 from .segment.qa import report_options
 from .segment.report import write_result_folder
-from .settings import Settings, class_spec, defaults
+from .settings import Settings, class_spec, defaults, smallest_rock_asked
 
 __all__ = [
     'MIN_KEYFRAMES',
@@ -174,7 +174,7 @@ def run_cloud_reconstruction(
     start = time.perf_counter()
     try:
         mesh, info = mesh_cloud(cloud, settings.cloud, settings.recon.poisson, 1.0, 'sensor',
-                                viewpoints)  # fmt: skip
+                                viewpoints, smallest_rock_asked(settings))  # fmt: skip
         if stream is not None and info.cloud is not None:
             info.cloud['stream'] = stream
         work.dense.mkdir(parents=True, exist_ok=True)

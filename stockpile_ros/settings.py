@@ -40,7 +40,7 @@ from .recon.sfm import SfmOptions
 from .recon.surface import PoissonOptions
 from .segment.gradation import load_class_table
 from .segment.measure import MeasureParams
-from .segment.params import SegmentParams
+from .segment.params import SegmentParams, asked_min_rock_b
 from .segment.qa import ReportOptions
 
 __all__ = [
@@ -59,6 +59,7 @@ __all__ = [
     'load_params_yaml',
     'render_params_yaml',
     'settings_for',
+    'smallest_rock_asked',
     'write_effective',
 ]
 
@@ -578,3 +579,12 @@ def class_spec(settings: Settings) -> dict[str, Any] | None:
         return None
     spec: dict[str, Any] = load_class_table(settings.class_table)['classes'][settings.spec_class]
     return spec
+
+
+def smallest_rock_asked(settings: Settings) -> float:
+    """Return the smallest rock of interest asked for: segment.min_rock_b, else the class's [m].
+
+    0 when neither is given (the mesh's own floor is then the smallest rock).
+    """
+    asked = asked_min_rock_b(settings.segment, class_spec(settings))
+    return 0.0 if asked is None else asked[1]

@@ -23,6 +23,7 @@ from stockpile_ros.cloud import (
     trend_up,
 )
 from stockpile_ros.cloud.level import SIGN_FROM_INPUT_Z
+from stockpile_ros.cloud.mesh import one_per_cell
 from stockpile_ros.cloud.noise import point_noise
 from stockpile_ros.errors import StockpileError
 from stockpile_ros.recon.surface import PoissonOptions
@@ -153,6 +154,45 @@ def test_trend_plane_is_the_ground_under_a_pile_that_holds_most_points() -> None
 
 def _cloud(points: np.ndarray, normals: np.ndarray | None = None) -> Cloud:
     return Cloud(points, normals, None, 'test', 'text')
+
+
+def test_one_point_a_cell_nearest_its_centre_whatever_the_order() -> None:
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-1.0, 1.0, (20_000, 3)) * np.array([1.0, 1.0, 0.05]) + 40.0
+    kept = one_per_cell(points, 0.1)
+    cells = np.floor(points / 0.1).astype(np.int64)
+    assert len(kept) == len(np.unique(cells, axis=0))
+    assert len(np.unique(cells[kept], axis=0)) == len(kept)
+    # No point of a cell lies nearer its centre than the one kept.
+    off = np.linalg.norm(points / 0.1 - cells - 0.5, axis=1)
+    _, inverse = np.unique(cells, axis=0, return_inverse=True)
+    best = np.full(len(kept), np.inf)
+    np.minimum.at(best, np.ravel(inverse), off)
+    assert np.array_equal(np.sort(off[kept]), np.sort(best))
+    shuffle = rng.permutation(len(points))
+    again = shuffle[one_per_cell(points[shuffle], 0.1)]
+    assert np.array_equal(np.sort(again), kept)
+
+
+def test_a_cloud_finer_than_the_smallest_rock_needs_is_thinned_to_it() -> None:
+    bed = _grain_bed(n=40, half=0.6, seed=2)  # 1 cm spacing
+    cloud, opts, poisson = _cloud(bed), CloudOptions(), PoissonOptions()
+    _, full = mesh_cloud(cloud, opts, poisson, 1.0, 'given')
+    _, same = mesh_cloud(cloud, opts, poisson, 1.0, 'given', min_rock_b=0.5)
+    # 0.5 m over 60 resolutions is under the 1 cm spacing: nothing to thin.
+    assert same.cloud['thinned_to'] == 0.0
+    assert same.cloud['points_used'] == full.cloud['points_used']
+    _, thin = mesh_cloud(cloud, opts, poisson, 1.0, 'given', min_rock_b=1.5)
+    assert thin.cloud['thinned_to'] == pytest.approx(0.025)
+    assert thin.cloud['resolution'] == pytest.approx(0.025)
+    # One point a cell of 1.5 resolutions: the thinned points lie about a resolution apart.
+    assert point_spacing(bed[one_per_cell(bed, 1.5 * 0.025)])[0] == pytest.approx(0.025, rel=0.3)
+    assert thin.cloud['points_used'] < 0.25 * full.cloud['points_used']
+    assert thin.poisson['depth'] < full.poisson['depth']
+    assert thin.cloud['spacing'] == full.cloud['spacing']  # the input's, as read
+    _, off = mesh_cloud(cloud, CloudOptions(max_rock_spacings=0.0), poisson, 1.0, 'given',
+                        min_rock_b=1.5)  # fmt: skip
+    assert off.cloud['points_used'] == full.cloud['points_used']
 
 
 def test_units_and_given_up() -> None:
@@ -316,6 +356,21 @@ def test_units_decide_the_scale(survey, capsys) -> None:  # type: ignore[no-unty
     report = load(Report, out / 'report.json')
     assert report.units == 'm' and report.scale.method == 'input units'
     assert len(report.rocks) > 10
+
+
+def test_the_smallest_rock_asked_for_thins_a_finer_cloud(survey, capsys) -> None:  # type: ignore[no-untyped-def]
+    root, s = survey
+    path = root / 'thinned.xyz'
+    np.savetxt(path, s.points, fmt='%.5f')
+    out = root / 'thinned'
+    flags = ['--units', 'm', '--set', 'segment.min_rock_b=1.5']
+    assert main(['segment', str(path), '--out', str(out), *flags]) == 0
+    cloud = load(Report, out / 'report.json').mesh.cloud
+    assert cloud is not None
+    # 1.5 m over 60 resolutions: 2.5 cm, against the survey's 1 cm.
+    assert cloud['thinned_to'] == pytest.approx(0.025)
+    assert cloud['points_used'] < 0.3 * cloud['points_read']
+    assert 'thinned to 0.025 m' in capsys.readouterr().out
 
 
 def test_a_foreign_mesh_is_levelled_unless_it_is_in_the_stockpile_frame(tmp_path) -> None:  # type: ignore[no-untyped-def]

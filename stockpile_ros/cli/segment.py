@@ -27,7 +27,7 @@ from ..segment.pipeline import analyse_mesh
 from ..segment.provenance import Provenance
 from ..segment.qa import report_options
 from ..segment.report import write_result_folder
-from ..settings import Settings, class_spec, defaults, write_effective
+from ..settings import Settings, class_spec, defaults, smallest_rock_asked, write_effective
 from .parameters import Alias, add_parameter_arguments, settings_from_args
 
 __all__ = ['DESCRIPTION', 'add_arguments', 'run']
@@ -120,11 +120,16 @@ def _from_cloud(
         metres, method = 1.0, 'input units'
     else:
         metres, method = 1.0, 'none'
-    mesh, info = mesh_cloud(cloud, settings.cloud, settings.recon.poisson, metres, method)
+    mesh, info = mesh_cloud(cloud, settings.cloud, settings.recon.poisson, metres, method,
+                            min_rock_b=smallest_rock_asked(settings))  # fmt: skip
     mesh, check = check_mesh(mesh, args.mesh)
     c, p = info.cloud or {}, info.poisson
     unit = 'm' if method != 'none' else 'model units'
-    print(f'cloud: {c["points_used"]} points, spacing {c["spacing"]:.3g} {unit}, up '
+    thinned = ''
+    if c['thinned_to']:
+        thinned = (f' of {c["points_read"]} (thinned to {c["thinned_to"]:.3g} {unit}, all the '
+                   'smallest rock of interest needs)')  # fmt: skip
+    print(f'cloud: {c["points_used"]} points{thinned}, spacing {c["spacing"]:.3g} {unit}, up '
           f'{c["up"]["tilt_deg"]:.1f} deg from the input z, Poisson depth {p["depth"]} -> '
           f'{p["faces"]} faces')  # fmt: skip
     if method == 'none':

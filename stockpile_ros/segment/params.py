@@ -26,6 +26,7 @@ __all__ = [
     'Mode',
     'RockScale',
     'SegmentParams',
+    'asked_min_rock_b',
     'class_max_rock_b',
     'class_min_rock_b',
     'median_edge',
@@ -462,6 +463,19 @@ def class_max_rock_b(spec: Mapping[str, Any]) -> float | None:
     return max(highs) if highs else None
 
 
+def asked_min_rock_b(
+    params: SegmentParams, spec: Mapping[str, Any] | None = None
+) -> tuple[Literal['parameter', 'class'], float] | None:
+    """Return the smallest rock of interest asked for, and where from; None when none was.
+
+    ``min_rock_b`` when given, else the class's (:func:`class_min_rock_b`) when one is checked.
+    """
+    if params.min_rock_b > 0:
+        return 'parameter', params.min_rock_b
+    from_class = class_min_rock_b(spec) if spec is not None else None
+    return None if from_class is None else ('class', from_class)
+
+
 def rock_scale(
     params: SegmentParams, edge: float, spec: Mapping[str, Any] | None = None
 ) -> RockScale:
@@ -480,13 +494,11 @@ def rock_scale(
 
     """
     floor = params.min_rock_edges * edge
+    asked = asked_min_rock_b(params, spec)
     source: Literal['parameter', 'class', 'mesh'] = 'mesh'
     requested = floor
-    from_class = class_min_rock_b(spec) if spec is not None else None
-    if params.min_rock_b > 0:
-        source, requested = 'parameter', params.min_rock_b
-    elif from_class is not None:
-        source, requested = 'class', from_class
+    if asked is not None:
+        source, requested = asked
     b = max(requested, floor)
     largest = params.max_rock_b or (class_max_rock_b(spec) if spec is not None else None) or 0.0
     return RockScale(
