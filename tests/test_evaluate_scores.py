@@ -366,6 +366,9 @@ def test_unscaled_result_is_rescaled_not_judged(tmp_path: Path, truth: Truth) ->
     for q in ('a', 'b', 'c', 'volume'):
         assert _rock_errors(ev, q) == pytest.approx([0.0] * 5, abs=1e-12)
     assert ev['gradation']['d50_error'] == pytest.approx(0.0, abs=1e-12)
+    # The run's smallest rock of interest, in its own units, is read in truth metres.
+    interest = ev['detection']['of_interest']
+    assert (interest['source'], interest['min_b_m']) == ('report', pytest.approx(0.1 / 0.37))
 
 
 def test_merged_rocks_cost_recall_and_count_as_a_merge(tmp_path: Path, truth: Truth) -> None:
@@ -419,6 +422,37 @@ def test_pieces_of_a_barely_visible_rock_count_neither_way(tmp_path: Path, truth
     assert [f['lies_on'] for f in det['false']] == ['rock 5']
     assert det['precision'] == pytest.approx(5 / 6)
     assert (det['precision_visible'], det['recall_visible']) == (1.0, 1.0)
+
+
+def test_rocks_under_the_smallest_rock_of_interest_are_left_aside(
+    tmp_path: Path, truth: Truth
+) -> None:
+    # Rocks 3, 4 and 5 (b 0.12, 0.18, 0.06 m) reported as one: a false rock among the visible
+    # ones, and among the rocks of b >= 0.19 m (1 and 2) a cluster of smaller rocks.
+    labels = truth.mesh.labels.copy()
+    labels[np.isin(labels, [4, 5])] = 3
+    rocks = [r for r in truth.data['rocks'] if r['id'] not in (4, 5)]
+    result = make_result(tmp_path, truth, 'clustered', labels=labels, rocks=rocks)
+    det = evaluate(result, truth.path, EvaluationOptions(min_b=0.19))['detection']
+    assert (det['recall_visible'], det['precision_visible']) == (0.5, pytest.approx(2 / 3))
+    interest = det['of_interest']
+    assert (interest['min_b_m'], interest['source']) == (0.19, 'option')
+    assert (interest['true_rocks'], interest['true_rocks_under']) == (2, 3)
+    assert (interest['recall'], interest['precision']) == (1.0, pytest.approx(2 / 3))
+    assert (interest['missed'], interest['clusters']) == ([], [3])
+    # From the report (0.1 m): only rock 5 is under it, and the figures are the visible ones.
+    det = evaluate(result, truth.path)['detection']
+    interest = det['of_interest']
+    assert (interest['source'], interest['min_b_m'], interest['true_rocks_under']) == (
+        'report',
+        0.1,
+        1,
+    )
+    assert (interest['recall'], interest['precision']) == (
+        det['recall_visible'],
+        det['precision_visible'],
+    )
+    assert interest['missed'] == det['missed'] == [3, 4]
 
 
 def test_missing_rocks_cost_recall_only_when_visible(tmp_path: Path, truth: Truth) -> None:
@@ -526,6 +560,7 @@ def test_cli_prints_a_table_and_writes_json(
     assert main(['evaluate', str(result), str(truth.path / 'truth.json'), '--json', str(out)]) == 0
     text = capsys.readouterr().out
     assert 'precision 1.000, recall 1.000' in text
+    assert 'rocks of interest (visible, b >= 0.1 m from the report; 1 true rocks under it' in text
     assert 'scale error +5.00 %' in text
     assert 'volume MAPE 15.76 %' in text
     ev = json.loads(out.read_text())

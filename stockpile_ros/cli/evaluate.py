@@ -20,7 +20,11 @@ written by `stockpile simulate` (TRUTH: the <BAG>_truth folder with truth.json +
 2. Each result face takes the label of the nearest true surface within a distance gate; face
    areas give the surface IoU of every result/true rock pair; a one-to-one assignment with
    IoU >= --min-iou decides detected, missed (visible fraction >= --visible) and false rocks, and
-   merges and splits are counted.
+   merges and splits are counted. The same figures are given again over the rocks of interest:
+   the visible true rocks at least as large (b) as the smallest rock the run segmented for
+   (report.json's segmentation.scale.min_rock_b) or --min-b; smaller true rocks are left aside as
+   barely visible ones are, and a result rock made of several of them is a false rock (a
+   cluster).
 3. Matched rocks are compared on a, b, c and volume in truth metres (a result that claims metric
    units as reported; an unscaled one multiplied by the alignment scale), with D50 and the scale.
 
@@ -65,6 +69,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         '(default %(default)g)',
     )
 
+    parser.add_argument(
+        '--min-b',
+        type=float,
+        metavar='M',
+        help='smallest rock of interest in truth metres (default: the one the run segmented for; '
+        '0 counts every visible rock)',
+    )
+
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print the table, write the JSON if asked; returns 0."""
@@ -72,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         stamp_tolerance_ns=round(args.stamp_tolerance_ms * 1e6),
         max_distance=args.max_distance,
         match=MatchOptions(min_iou=args.min_iou, visible_threshold=args.visible),
+        min_b=args.min_b,
     )
     evaluation = evaluate(args.result, args.truth, options)
     print(format_table(evaluation))

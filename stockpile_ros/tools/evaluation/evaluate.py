@@ -34,6 +34,11 @@ class EvaluationOptions:
             pile extent.
         gate_fraction: Gate as a share of the pile extent, when ``max_distance`` is None.
         match: Thresholds of the rock matching.
+        min_b: The smallest rock of interest of the detection figures ``of_interest`` [true
+            m]; None for the one the run segmented for (its report's
+            ``segmentation.scale.min_rock_b``, times the length factor). True rocks under it
+            are left aside there as the barely visible ones are, and a result rock made of
+            several of them is a false rock (a cluster).
 
     """
 
@@ -41,6 +46,7 @@ class EvaluationOptions:
     max_distance: float | None = None
     gate_fraction: float = 0.02
     match: MatchOptions = field(default_factory=MatchOptions)
+    min_b: float | None = None
 
 
 def pile_extent(truth: TruthSide) -> float:
@@ -117,36 +123,48 @@ def _detection_dict(
     result: ResultSide,
     matching: RockMatching,
     options: EvaluationOptions,
-    gate: float,
-    true_labels: npt.NDArray[np.int64],
-    areas: npt.NDArray[np.float64],
+    min_b: float,
 ) -> dict[str, Any]:
-    threshold = options.match.visible_threshold
+    threshold, share = options.match.visible_threshold, options.match.major_share
 
     def visible(tid: int) -> bool:
         vf = truth.rocks[tid].visible_fraction
         return vf is None or vf >= threshold
 
+    def fine(tid: int) -> bool:
+        b = truth.rocks[tid].b
+        return b is not None and b < min_b
+
     detected = {p[1] for p in matching.pairs}
     visible_ids = [t for t in truth.rocks if visible(t)]
-    tp_visible = sum(1 for t in detected if visible(t))
+    seen = matching.detection(visible_ids, [], share)
+    fines = [t for t in truth.rocks if fine(t)]
+    of_interest = [t for t in visible_ids if not fine(t)]
+    asked = matching.detection(of_interest, fines, share)
     n_true, n_result = len(truth.rocks), len(result.rocks)
-    hidden = {t for t in truth.rocks if not visible(t)}
-    n_result_visible = n_result - len(matching.on_hidden(hidden, options.match.major_share))
-    total_area = float(areas.sum())
-    off_area = float(areas[true_labels == OFF_SURFACE].sum())
-    listed = np.isin(result.mesh.labels, list(result.rocks))
     return {
         'true_rocks': n_true,
         'true_rocks_visible': len(visible_ids),
         'visible_threshold': threshold,
         'result_rocks': n_result,
         'detected': len(detected),
-        'detected_visible': tp_visible,
+        'detected_visible': len(seen.found),
         'precision': _ratio(len(detected), n_result),
         'recall': _ratio(len(detected), n_true),
-        'precision_visible': _ratio(tp_visible, n_result_visible),
-        'recall_visible': _ratio(tp_visible, len(visible_ids)),
+        'precision_visible': seen.precision,
+        'recall_visible': seen.recall,
+        'of_interest': {
+            'min_b_m': min_b,
+            'source': 'report' if options.min_b is None else 'option',
+            'true_rocks': asked.true_rocks,
+            'true_rocks_under': len(fines),
+            'result_rocks': asked.result_rocks,
+            'detected': len(asked.found),
+            'recall': asked.recall,
+            'precision': asked.precision,
+            'missed': sorted(set(of_interest) - {t for _, t in asked.found}),
+            'clusters': sorted(asked.clusters),
+        },
         'missed': sorted(t for t in visible_ids if t not in detected),
         'missed_hidden': sorted(t for t in truth.rocks if t not in detected and not visible(t)),
         'false': [{'id': r, 'lies_on': why} for r, why in sorted(matching.false_reasons.items())],
@@ -156,6 +174,19 @@ def _detection_dict(
             {'result_id': r, 'true_id': t, 'iou': iou}
             for r, t, iou in sorted(matching.pairs, key=lambda p: p[1])
         ],
+    }
+
+
+def _surface_dict(
+    result: ResultSide,
+    gate: float,
+    true_labels: npt.NDArray[np.int64],
+    areas: npt.NDArray[np.float64],
+) -> dict[str, Any]:
+    total_area = float(areas.sum())
+    off_area = float(areas[true_labels == OFF_SURFACE].sum())
+    listed = np.isin(result.mesh.labels, list(result.rocks))
+    return {
         'max_distance_m': gate,
         'off_surface_area_share': _ratio(off_area, total_area),
         'faces_with_unlisted_ids': int(np.count_nonzero((result.mesh.labels > 0) & ~listed)),
@@ -192,6 +223,7 @@ def evaluate_sides(
         mesh.labels[transfer.face], transfer, sorted(result.rocks), sorted(truth.rocks), opts.match
     )
     length_factor = 1.0 if result.metric else alignment.scale
+    min_b = result.min_rock_b * length_factor if opts.min_b is None else opts.min_b
     errors = rock_errors(matching.pairs, result.rocks, truth.rocks, alignment, length_factor)
     summary = summarise(errors)
     threshold = opts.match.visible_threshold
@@ -208,9 +240,8 @@ def evaluate_sides(
         'options': asdict(opts),
         'alignment': _alignment_dict(alignment, extent),
         'scale': _scale_dict(result, alignment),
-        'detection': _detection_dict(
-            truth, result, matching, opts, gate, transfer.true_labels, transfer.areas
-        ),
+        'detection': _detection_dict(truth, result, matching, opts, min_b)
+        | _surface_dict(result, gate, transfer.true_labels, transfer.areas),
         'sizes': {
             'length_factor': length_factor,
             'summary': summary,

@@ -114,6 +114,8 @@ class ResultSide:
         rocks: Reported rocks by id.
         d50: Reported D50 by mass, or None.
         mesh: Segmented mesh (rock ids as in ``rocks``, 0 = ground or unassigned).
+        min_rock_b: The smallest rock of interest the run segmented for
+            (``segmentation.scale.min_rock_b``), in the result's units.
 
     """
 
@@ -124,6 +126,7 @@ class ResultSide:
     rocks: dict[int, Rock]
     d50: float | None
     mesh: LabelledMesh
+    min_rock_b: float
 
     @property
     def metric(self) -> bool:
@@ -297,4 +300,5 @@ def load_result(path: str | Path) -> ResultSide:
         rocks=_result_rocks(report.rocks, where),
         d50=_number(report.gradation.d50),
         mesh=_read_mesh(folder / 'segments.ply'),
+        min_rock_b=report.segmentation.scale.min_rock_b,
     )

@@ -129,30 +129,21 @@ def score_labels(
     visible = {
         k for k, r in truth.items() if r.visible_fraction >= opt.visible_threshold and r.b >= min_b
     }
-    found = [(r, k) for r, k, _ in matching.pairs if k in visible]
-    about_hidden = matching.on_hidden(set(truth) - visible, opt.major_share)
-    small = [j for j, k in enumerate(matching.true_ids) if truth[k].b < min_b]
-    on_small = matching.overlap[:, small].sum(axis=1)
-    clusters = [
-        rid
-        for i, rid in enumerate(matching.result_ids)
-        if rid not in about_hidden
-        and matching.result_area[i] > 0
-        and on_small[i] >= opt.major_share * matching.result_area[i]
-    ]
+    fines = [k for k, r in truth.items() if r.b < min_b]
+    hits = matching.detection(visible, fines, opt.major_share)
+    found = hits.found
     rel = np.array([measured[r].b / truth[k].b - 1.0 for r, k in found])
     d50_true = _d50(list(truth.values()))
     d50_visible = _d50([truth[k] for k in visible])
     d50 = _d50(list(measured.values()))
-    counted = len(measured) - len(about_hidden)
     return LabelScore(
         visible=len(visible),
         reported=len(measured),
         found=len(found),
-        recall=len(found) / len(visible) if visible else float('nan'),
-        precision=len(found) / counted if counted else float('nan'),
+        recall=hits.recall if hits.recall is not None else float('nan'),
+        precision=hits.precision if hits.precision is not None else float('nan'),
         merges=len(matching.merges),
-        clusters=len(clusters),
+        clusters=len(hits.clusters),
         splits=len(matching.splits),
         b_error=float(np.median(np.abs(rel))) if len(rel) else float('nan'),
         b_bias=float(np.median(rel)) if len(rel) else float('nan'),

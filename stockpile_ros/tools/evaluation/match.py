@@ -11,6 +11,7 @@ surface of true rock ``t`` is every result face labelled ``t``, whatever result 
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,7 @@ __all__ = [
     'MAX_PIECES',
     'MAX_SPLIT_LEVELS',
     'OFF_SURFACE',
+    'Detection',
     'LabelTransfer',
     'MatchOptions',
     'RockMatching',
@@ -234,6 +236,64 @@ class RockMatching:
             if about:
                 out.append(rid)
         return out
+
+    def detection(
+        self, counted: Collection[int], fines: Collection[int], share: float
+    ) -> Detection:
+        """Score the result against the true rocks ``counted``, the others being left aside.
+
+        A true rock not in ``counted`` (barely visible, or under the smallest rock of interest)
+        is neither missed nor, found, a hit; a result rock about one of them (see
+        :meth:`on_hidden`) is not counted either way, but one that is about none of them and lies
+        mostly (``share`` of its area) on several of ``fines`` is a false rock, and a cluster.
+        """
+        keep = set(counted)
+        found = [(r, t) for r, t, _ in self.pairs if t in keep]
+        aside = set(self.on_hidden(set(self.true_ids) - keep, share))
+        fine = set(fines)
+        small = [j for j, t in enumerate(self.true_ids) if t in fine]
+        on_small = self.overlap[:, small].sum(axis=1)
+        clusters = [
+            rid
+            for i, rid in enumerate(self.result_ids)
+            if rid not in aside
+            and self.result_area[i] > 0
+            and on_small[i] >= share * self.result_area[i]
+        ]
+        return Detection(
+            true_rocks=len(keep),
+            result_rocks=len(self.result_ids) - len(aside),
+            found=found,
+            clusters=clusters,
+        )
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Hits of a matching over the true rocks it counts.
+
+    Attributes:
+        true_rocks: True rocks counted.
+        result_rocks: Result rocks counted (not about a true rock left aside).
+        found: (result id, true id) of each counted true rock matched one to one.
+        clusters: Result rocks lying mostly on several true rocks too small to count.
+
+    """
+
+    true_rocks: int
+    result_rocks: int
+    found: list[tuple[int, int]]
+    clusters: list[int]
+
+    @property
+    def recall(self) -> float | None:
+        """Counted true rocks found, over those counted (None without any)."""
+        return len(self.found) / self.true_rocks if self.true_rocks else None
+
+    @property
+    def precision(self) -> float | None:
+        """Counted true rocks found, over the result rocks counted (None without any)."""
+        return len(self.found) / self.result_rocks if self.result_rocks else None
 
 
 def _share(num: FloatArray, den: FloatArray) -> FloatArray:

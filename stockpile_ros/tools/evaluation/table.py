@@ -44,6 +44,15 @@ def _alignment_lines(al: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _interest_line(it: dict[str, Any]) -> str:
+    return (
+        f'  rocks of interest (visible, b >= {it["min_b_m"]:.4g} m from the {it["source"]}; '
+        f'{it["true_rocks_under"]} true rocks under it left aside): {it["true_rocks"]} true, '
+        f'{it["detected"]} detected, precision {_num(it["precision"], ".3f")}, '
+        f'recall {_num(it["recall"], ".3f")}; clusters of smaller rocks: {_ids(it["clusters"])}'
+    )
+
+
 def _detection_lines(det: dict[str, Any]) -> list[str]:
     false = [f'{f["id"]} (on {f["lies_on"]})' for f in det['false']]
     merges = [
@@ -59,6 +68,7 @@ def _detection_lines(det: dict[str, Any]) -> list[str]:
         f'  precision {_num(det["precision"], ".3f")}, recall {_num(det["recall"], ".3f")}; '
         f'visible rocks: precision {_num(det["precision_visible"], ".3f")}, '
         f'recall {_num(det["recall_visible"], ".3f")}',
+        _interest_line(det['of_interest']),
         f'  missed (visible): {_ids(det["missed"])}; '
         f'not found (hidden): {_ids(det["missed_hidden"])}',
         f'  false: {_ids(false)}',
