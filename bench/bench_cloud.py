@@ -6,7 +6,10 @@ degrees and offset as georeferenced coordinates are) is written as binary PLY, A
 each goes through ``stockpile segment FILE --units m`` (LAZ without --units: survey units) in this
 process. Printed per file: seconds from file to result folder, the reading and meshing part of it
 (measured again on its own), rocks found against the truth, the median b error and the D50 error
-(by mass, against every true rock). The survey is
+(by mass, against every true rock), then the smallest rock of interest the run segmented for
+(``floor``) and the recall and precision over the visible rocks at least that large (smaller
+rocks left aside, several of them reported as one a false rock: ``stockpile evaluate``'s
+``of_interest``). The survey is
 cached under ``--cache``.
 
 With ``--bed`` the rocks cover the ground as a gravel bar's do (``stockpile_ros.tools.sim.bed``),
@@ -16,11 +19,14 @@ gravel bar such as #16's (about 1 cm spacing, b D50 about 0.2 m, a few hundred g
 the points thin out with range as a scanner's do (``--spacing`` is then the spacing nearest a
 scanner); with ``--aspect 4`` they lie in rows four times farther apart across than along; with
 ``--no-overhead`` only the ring of tripods scans, at a glancing angle; ``--flat`` sets the share
-of flat rocks. ``--formats ply`` runs one file of the three (a dense cloud takes minutes each).
+of flat rocks; with ``--footprint 1`` a beam one spacing wide that straddles a rock's silhouette
+returns a range between the rock and what lies behind it (mixed pixels). ``--formats ply`` runs
+one file of the three (a dense cloud takes minutes each).
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
         [--bed] [--rounding R] [--falloff P] [--aspect A] [--flat F] [--no-overhead]
+        [--footprint W]
         [--formats ply xyz laz] [--cache DIR] [--set NAME=VALUE ...]
 """
 
@@ -67,7 +73,7 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
         scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding, **shares)
     made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
                            falloff=args.falloff, aspect=args.aspect,
-                           overhead=args.overhead)  # fmt: skip
+                           overhead=args.overhead, footprint=args.footprint)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -103,6 +109,9 @@ def run() -> None:
                         help='share of flat rocks (c about 0.38 b), lying mostly flat')  # fmt: skip
     parser.add_argument('--no-overhead', dest='overhead', action='store_false',
                         help='scanned from the ring of tripods alone, none above')  # fmt: skip
+    parser.add_argument('--footprint', type=float, default=0.0,
+                        help="the scanner's beam width at the surface, in spacings: where it "
+                        'straddles two surfaces, a mixed pixel between them')  # fmt: skip
     parser.add_argument('--formats', nargs='+', default=['ply', 'xyz', 'laz'],
                         choices=['ply', 'xyz', 'laz'],
                         help='files to run (a dense cloud: one)')  # fmt: skip
@@ -126,13 +135,17 @@ def run() -> None:
         folder = folder.with_name(f'{folder.name}_flat{args.flat:g}')
     if not args.overhead:
         folder = folder.with_name(f'{folder.name}_ring')
+    if args.footprint:
+        folder = folder.with_name(f'{folder.name}_footprint{args.footprint:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)
-    print(f'survey: {len(s.points)} points, {len(s.truth["rocks"])} rocks '
+    mixed = s.truth['scene']['survey'].get('mixed_pixels', 0)
+    print(f'survey: {len(s.points)} points ({mixed} mixed pixels), {len(s.truth["rocks"])} rocks '
           f'({time.perf_counter() - start:.1f} s to simulate or load)')  # fmt: skip
     print(f'{"file":<12} {"MB":>6} {"to report s":>12} {"read+mesh s":>12} {"rocks":>6} '
-          f'{"recall":>7} {"precision":>9} {"|b| err %":>9} {"D50 err %":>9}')  # fmt: skip
+          f'{"recall":>7} {"precision":>9} {"|b| err %":>9} {"D50 err %":>9} '
+          f'{"floor m":>8} {"recall":>7} {"precision":>9}')  # fmt: skip
     for path, flags in write_files(s, folder):
         if path.suffix[1:] not in args.formats:
             continue
@@ -152,6 +165,8 @@ def run() -> None:
         d50 = 100.0 * scores['gradation']['d50_error']
         size = path.stat().st_size / 1e6
         found = f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f} {d50:+9.1f}'
+        it = d['of_interest']
+        found += f' {it["min_b_m"]:8.3f} {it["recall"]:7.2f} {it["precision"]:9.2f}'
         print(f'{path.name:<12} {size:6.1f} {total:12.1f} {meshing:12.1f} {d["result_rocks"]:6d} '
               f'{found}')  # fmt: skip
 

@@ -312,6 +312,23 @@ def test_a_survey_from_the_tripods_alone_sees_less_of_each_rock(survey, tmp_path
     assert len(s.points) < len(above.points)
 
 
+def test_mixed_pixels_leave_the_surface_where_a_beam_straddles_a_silhouette(  # type: ignore[no-untyped-def]
+    survey, tmp_path
+) -> None:
+    _, clean = survey
+    pile = PileConfig(rocks=30, gradation=parse_gradation('0.12:0.3'))
+    s = simulate_survey(tmp_path / 'truth', pile, seed=1, spacing=0.01, noise=0.002,
+                        footprint=1.0)  # fmt: skip
+    moved = np.linalg.norm(s.points - clean.points, axis=1)
+    mixed = moved > 0
+    # The same samples and noise; only the mixed ones moved, off the surface by far more than
+    # the noise (into the gaps between a rock's edge and what lies behind it).
+    assert np.array_equal(s.labels, clean.labels)
+    assert s.truth['scene']['survey']['mixed_pixels'] == int(mixed.sum())
+    assert 0.02 < mixed.mean() < 0.3
+    assert np.median(moved[mixed]) > 10 * 0.002
+
+
 def test_which_side_is_up_without_normals(survey) -> None:  # type: ignore[no-untyped-def]
     _, s = survey
     truth = s.survey_to_pile.rotation.T @ np.array([0.0, 0.0, 1.0])

@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from ...artefacts import MeshInfo, load, to_json
 from ...bagio.writer import BagWriter
 from ...geometry import Similarity
+from ...meshio import LabelledMesh
 from ...result import Report
 from ...ros import messages as m
 from ...ros.outputs import pointcloud2
@@ -75,6 +76,7 @@ def simulate_survey(
     falloff: float = 0.0,
     aspect: float = 1.0,
     overhead: bool = True,
+    footprint: float = 0.0,
     tilt_deg: float = 10.0,
     offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
 ) -> Survey:
@@ -96,6 +98,11 @@ def simulate_survey(
         overhead: Whether a scanner position above the middle sees the pile too (as a drone or
             a mast would); without it only the ring of tripods 1.5 m high sees it, at a glancing
             angle, and every rock shadows the ground and the rocks behind it.
+        footprint: Width of a scanner's beam where it meets the surface [spacings; 0: a beam
+            sees one point]. Each point is scanned from one of the positions that see it; where
+            its beam straddles the silhouette of one surface against another (a rock against
+            the ground or a rock behind it), it returns a range drawn uniformly between the two,
+            along the beam's middle: a mixed pixel, in the air between the two surfaces.
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
 
@@ -130,13 +137,21 @@ def simulate_survey(
         eye = np.min(np.linalg.norm(dense.points[first, None] - eyes[None], axis=2), axis=1)
         first = first[rng.random(len(first)) < (eye.min() / eye) ** falloff]
     sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
+    mixed = 0
+    if footprint > 0:
+        # Its own stream: the points and noise of a survey without mixed pixels stay the same.
+        moved, mixed = _mixed_pixels(
+            sampled, eyes, scene, footprint * spacing, np.random.default_rng([seed, 1])
+        )
+        sampled = SyntheticPile([], moved, sampled.normals, sampled.labels)
     truth = {
         'schema': TRUTH_SCHEMA,
         'units': 'm',
         'frame_id': 'pile',
         'seed': seed,
         'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
-                             'aspect': aspect, 'overhead': overhead, 'tilt_deg': tilt_deg,
+                             'aspect': aspect, 'overhead': overhead, 'footprint': footprint,
+                             'mixed_pixels': mixed, 'tilt_deg': tilt_deg,
                              'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
                              'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
@@ -160,6 +175,63 @@ def simulate_survey(
         survey_to_pile=to_pile,
         truth=truth,
     )
+
+
+def _mixed_pixels(
+    sampled: SyntheticPile,
+    eyes: F64,
+    scene: LabelledMesh,
+    width: float,
+    rng: np.random.Generator,
+) -> tuple[F64, int]:
+    """Return the points with the mixed pixels of beams ``width`` wide, and how many were mixed."""
+    import open3d
+
+    o3d: Any = open3d
+
+    tensor = o3d.core.Tensor
+    caster = o3d.t.geometry.RaycastingScene()
+    caster.add_triangles(
+        tensor(scene.vertices.astype(np.float32)), tensor(scene.faces.astype(np.uint32))
+    )
+
+    def cast(origins: F64, directions: F64) -> tuple[F64, npt.NDArray[np.int64]]:
+        rays = np.hstack([origins, directions]).astype(np.float32)
+        hit = caster.cast_rays(tensor(rays))
+        return hit['t_hit'].numpy().astype(np.float64), hit['primitive_ids'].numpy().astype(
+            np.int64
+        )
+
+    points, normals = sampled.points, sampled.normals
+    start = points + normals * 1e-4
+    seen = np.zeros((len(points), len(eyes)), dtype=bool)
+    for k, eye in enumerate(eyes):
+        ray = eye - start
+        dist = np.linalg.norm(ray, axis=1)
+        t_hit, _ = cast(start, ray / dist[:, None])
+        seen[:, k] = (t_hit >= dist) & (np.einsum('ij,ij->i', ray, normals) > 0)
+    # The position each point was scanned from: one of those that see it, at random.
+    eye = eyes[np.argmax(rng.random(seen.shape) * seen, axis=1)]
+    beam = points - eye
+    reach = np.linalg.norm(beam, axis=1)
+    beam /= reach[:, None]
+    side = rng.normal(size=points.shape)
+    side -= np.einsum('ij,ij->i', side, beam)[:, None] * beam
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    edge = points + width * side - eye
+    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+    t_edge, face = cast(eye, edge)
+    hit = np.isfinite(t_edge)
+    other = np.full(len(points), -1, dtype=np.int64)
+    other[hit] = scene.labels[face[hit]]
+    mixed = seen.any(axis=1) & hit & (other != sampled.labels)
+    share = rng.random(len(points))
+    out = points.copy()
+    out[mixed] = (
+        eye[mixed]
+        + beam[mixed] * (reach[mixed] + share[mixed] * (t_edge[mixed] - reach[mixed]))[:, None]
+    )
+    return out, int(mixed.sum())
 
 
 def score_survey(
