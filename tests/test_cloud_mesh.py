@@ -430,6 +430,37 @@ def test_a_foreign_mesh_is_levelled_unless_it_is_in_the_stockpile_frame(tmp_path
     assert [r.b for r in kept.rocks] == pytest.approx(upright, rel=1e-3)
 
 
+def test_another_tools_mesh_is_told_where_its_floor_comes_from(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from segment_fixtures import height_field
+
+    from stockpile_ros.artefacts import MeshInfo, ScaleRecord, save
+    from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
+
+    def bumps(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.clip(0.15**2 - x**2 - y**2, 0, None))
+
+    v, f = height_field(bumps, 0.5, 60)
+    path = tmp_path / 'mesh.ply'
+    write_labelled_mesh(path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
+
+    def notes(*flags: str) -> list[str]:
+        out = tmp_path / f'out{len(list(tmp_path.iterdir()))}'
+        assert main(['segment', str(path), '--out', str(out), *flags]) == 0
+        warnings = load(Report, out / 'report.json').warnings
+        return [w for w in warnings if 'the floor fitted on meshes made from photos' in w]
+
+    # Another tool's mesh: its floor of 20 edges is said to be the one for meshes from photos.
+    (note,) = notes('--units', 'm')
+    assert 'taken as 20 median edge lengths' in note and 'segment.min_rock_edges lower' in note
+    # Its floor set explicitly, a smallest rock above the floor given, or this project's own
+    # mesh (with its mesh.json): nothing to say.
+    assert notes('--units', 'm', '--set', 'segment.min_rock_edges=20') == []
+    assert notes('--units', 'm', '--set', 'segment.min_rock_b=0.4') == []
+    info = tmp_path / 'mesh.json'
+    save(MeshInfo(ScaleRecord('given', 1.0), units='m'), info)
+    assert notes('--mesh-info', str(info)) == []
+
+
 def test_a_levelled_mesh_of_a_heap_over_little_ground_is_kept(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from segment_fixtures import height_field
 
