@@ -20,13 +20,14 @@ the points thin out with range as a scanner's do (``--spacing`` is then the spac
 scanner); with ``--aspect 4`` they lie in rows four times farther apart across than along; with
 ``--no-overhead`` only the ring of tripods scans, at a glancing angle; ``--flat`` sets the share
 of flat rocks; with ``--footprint 1`` a beam one spacing wide that straddles a rock's silhouette
-returns a range between the rock and what lies behind it (mixed pixels). ``--formats ply`` runs
-one file of the three (a dense cloud takes minutes each).
+returns a range between the rock and what lies behind it (mixed pixels); with ``--registration
+0.005`` each position's scan is shifted by a registration error of 5 mm along each axis.
+``--formats ply`` runs one file of the three (a dense cloud takes minutes each).
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
         [--bed] [--rounding R] [--falloff P] [--aspect A] [--flat F] [--no-overhead]
-        [--footprint W]
+        [--footprint W] [--registration M]
         [--formats ply xyz laz] [--cache DIR] [--set NAME=VALUE ...]
 """
 
@@ -73,7 +74,8 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
         scene = PileConfig(rocks=args.rocks, gradation=grading, rounding=args.rounding, **shares)
     made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
                            falloff=args.falloff, aspect=args.aspect,
-                           overhead=args.overhead, footprint=args.footprint)  # fmt: skip
+                           overhead=args.overhead, footprint=args.footprint,
+                           registration=args.registration)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -112,6 +114,9 @@ def run() -> None:
     parser.add_argument('--footprint', type=float, default=0.0,
                         help="the scanner's beam width at the surface, in spacings: where it "
                         'straddles two surfaces, a mixed pixel between them')  # fmt: skip
+    parser.add_argument('--registration', type=float, default=0.0,
+                        help="each scanner position's points shifted together by a draw of "
+                        'this standard deviation along each axis [m]')  # fmt: skip
     parser.add_argument('--formats', nargs='+', default=['ply', 'xyz', 'laz'],
                         choices=['ply', 'xyz', 'laz'],
                         help='files to run (a dense cloud: one)')  # fmt: skip
@@ -137,6 +142,8 @@ def run() -> None:
         folder = folder.with_name(f'{folder.name}_ring')
     if args.footprint:
         folder = folder.with_name(f'{folder.name}_footprint{args.footprint:g}')
+    if args.registration:
+        folder = folder.with_name(f'{folder.name}_registration{args.registration:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)

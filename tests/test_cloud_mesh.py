@@ -329,6 +329,19 @@ def test_mixed_pixels_leave_the_surface_where_a_beam_straddles_a_silhouette(  # 
     assert np.median(moved[mixed]) > 10 * 0.002
 
 
+def test_each_scan_is_shifted_by_its_own_registration_error(survey, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    _, clean = survey
+    pile = PileConfig(rocks=30, gradation=parse_gradation('0.12:0.3'))
+    s = simulate_survey(tmp_path / 'truth', pile, seed=1, spacing=0.01, noise=0.002,
+                        registration=0.005)  # fmt: skip
+    shift = np.round(s.points - clean.points, 6)
+    # One shift per scanner position (eight tripods and one above), a few millimetres each.
+    shifts = np.unique(shift, axis=0)
+    assert 2 <= len(shifts) <= 9
+    assert 0.001 < np.median(np.linalg.norm(shifts, axis=1)) < 0.03
+    assert s.truth['scene']['survey']['mixed_pixels'] == 0
+
+
 def test_which_side_is_up_without_normals(survey) -> None:  # type: ignore[no-untyped-def]
     _, s = survey
     truth = s.survey_to_pile.rotation.T @ np.array([0.0, 0.0, 1.0])

@@ -77,6 +77,7 @@ def simulate_survey(
     aspect: float = 1.0,
     overhead: bool = True,
     footprint: float = 0.0,
+    registration: float = 0.0,
     tilt_deg: float = 10.0,
     offset: tuple[float, float, float] = (500_000.0, 5_000_000.0, 300.0),
 ) -> Survey:
@@ -103,6 +104,9 @@ def simulate_survey(
             its beam straddles the silhouette of one surface against another (a rock against
             the ground or a rock behind it), it returns a range drawn uniformly between the two,
             along the beam's middle: a mixed pixel, in the air between the two surfaces.
+        registration: Error of registering each position's scan to the others [m]: every
+            position's points are shifted together by a draw of this standard deviation along
+            each axis, so that where two scans overlap the surface is drawn twice, apart.
         tilt_deg: Tilt of the survey frame's z from the pile's up [degrees].
         offset: Where the pile's origin lies in the survey frame [m].
 
@@ -138,11 +142,12 @@ def simulate_survey(
         first = first[rng.random(len(first)) < (eye.min() / eye) ** falloff]
     sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
     mixed = 0
-    if footprint > 0:
-        # Its own stream: the points and noise of a survey without mixed pixels stay the same.
-        moved, mixed = _mixed_pixels(
-            sampled, eyes, scene, footprint * spacing, np.random.default_rng([seed, 1])
-        )
+    if footprint > 0 or registration > 0:
+        # Its own stream: the points and noise of a survey without either stay the same.
+        moved, mixed = _scanned(
+            sampled, eyes, scene, footprint * spacing, registration,
+            np.random.default_rng([seed, 1]),
+        )  # fmt: skip
         sampled = SyntheticPile([], moved, sampled.normals, sampled.labels)
     truth = {
         'schema': TRUTH_SCHEMA,
@@ -151,7 +156,8 @@ def simulate_survey(
         'seed': seed,
         'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
                              'aspect': aspect, 'overhead': overhead, 'footprint': footprint,
-                             'mixed_pixels': mixed, 'tilt_deg': tilt_deg,
+                             'mixed_pixels': mixed, 'registration': registration,
+                             'tilt_deg': tilt_deg,
                              'rocks': pile.rocks, 'gradation': pile.gradation.as_dict(),
                              'bed': isinstance(pile, BedConfig), 'rounding': pile.rounding}},
         'cameras': [],
@@ -177,14 +183,21 @@ def simulate_survey(
     )
 
 
-def _mixed_pixels(
+def _scanned(
     sampled: SyntheticPile,
     eyes: F64,
     scene: LabelledMesh,
     width: float,
+    registration: float,
     rng: np.random.Generator,
 ) -> tuple[F64, int]:
-    """Return the points with the mixed pixels of beams ``width`` wide, and how many were mixed."""
+    """Return the points as the scanner positions would give them, and how many were mixed.
+
+    Each point is scanned from one of the positions that see it; with ``width`` > 0 a beam
+    that wide straddling two surfaces returns a range between them (a mixed pixel), and with
+    ``registration`` > 0 every position's points are shifted together by the error of
+    registering its scan to the others (that standard deviation along each axis).
+    """
     import open3d
 
     o3d: Any = open3d
@@ -210,27 +223,31 @@ def _mixed_pixels(
         dist = np.linalg.norm(ray, axis=1)
         t_hit, _ = cast(start, ray / dist[:, None])
         seen[:, k] = (t_hit >= dist) & (np.einsum('ij,ij->i', ray, normals) > 0)
-    # The position each point was scanned from: one of those that see it, at random.
-    eye = eyes[np.argmax(rng.random(seen.shape) * seen, axis=1)]
-    beam = points - eye
-    reach = np.linalg.norm(beam, axis=1)
-    beam /= reach[:, None]
-    side = rng.normal(size=points.shape)
-    side -= np.einsum('ij,ij->i', side, beam)[:, None] * beam
-    side /= np.linalg.norm(side, axis=1, keepdims=True)
-    edge = points + width * side - eye
-    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
-    t_edge, face = cast(eye, edge)
-    hit = np.isfinite(t_edge)
-    other = np.full(len(points), -1, dtype=np.int64)
-    other[hit] = scene.labels[face[hit]]
-    mixed = seen.any(axis=1) & hit & (other != sampled.labels)
-    share = rng.random(len(points))
+    station = np.argmax(rng.random(seen.shape) * seen, axis=1)
+    eye = eyes[station]
     out = points.copy()
-    out[mixed] = (
-        eye[mixed]
-        + beam[mixed] * (reach[mixed] + share[mixed] * (t_edge[mixed] - reach[mixed]))[:, None]
-    )
+    mixed = np.zeros(len(points), dtype=bool)
+    if width > 0:
+        beam = points - eye
+        reach = np.linalg.norm(beam, axis=1)
+        beam /= reach[:, None]
+        side = rng.normal(size=points.shape)
+        side -= np.einsum('ij,ij->i', side, beam)[:, None] * beam
+        side /= np.linalg.norm(side, axis=1, keepdims=True)
+        edge = points + width * side - eye
+        edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+        t_edge, face = cast(eye, edge)
+        hit = np.isfinite(t_edge)
+        other = np.full(len(points), -1, dtype=np.int64)
+        other[hit] = scene.labels[face[hit]]
+        mixed = seen.any(axis=1) & hit & (other != sampled.labels)
+        share = rng.random(len(points))
+        out[mixed] = (
+            eye[mixed]
+            + beam[mixed] * (reach[mixed] + share[mixed] * (t_edge[mixed] - reach[mixed]))[:, None]
+        )
+    if registration > 0:
+        out += rng.normal(0.0, registration, (len(eyes), 3))[station]
     return out, int(mixed.sum())
 
 
