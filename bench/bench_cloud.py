@@ -173,7 +173,10 @@ def run() -> None:
         size = path.stat().st_size / 1e6
         found = f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f} {d50:+9.1f}'
         it = d['of_interest']
-        found += f' {it["min_b_m"]:8.3f} {it["recall"]:7.2f} {it["precision"]:9.2f}'
+        found += f' {it["min_b_m"]:8.3f} ' + ' '.join(
+            '-'.rjust(w) if x is None else f'{x:{w}.2f}'
+            for x, w in ((it['recall'], 7), (it['precision'], 9))
+        )
         print(f'{path.name:<12} {size:6.1f} {total:12.1f} {meshing:12.1f} {d["result_rocks"]:6d} '
               f'{found}')  # fmt: skip
 

@@ -68,7 +68,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help='true rocks seen less than this fraction are not counted as missed '
         '(default %(default)g)',
     )
-
     parser.add_argument(
         '--min-b',
         type=float,
