@@ -21,13 +21,14 @@ scanner); with ``--aspect 4`` they lie in rows four times farther apart across t
 ``--no-overhead`` only the ring of tripods scans, at a glancing angle; ``--flat`` sets the share
 of flat rocks; with ``--footprint 1`` a beam one spacing wide that straddles a rock's silhouette
 returns a range between the rock and what lies behind it (mixed pixels); with ``--registration
-0.005`` each position's scan is shifted by a registration error of 5 mm along each axis.
+0.005`` each position's scan is shifted by a registration error of 5 mm along each axis; with
+``--noise-growth 2`` the range noise grows as the range squared from the nearest point's 2 mm.
 ``--formats ply`` runs one file of the three (a dense cloud takes minutes each).
 
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
         [--bed] [--rounding R] [--falloff P] [--aspect A] [--flat F] [--no-overhead]
-        [--footprint W] [--registration M]
+        [--footprint W] [--registration M] [--noise-growth P]
         [--formats ply xyz laz] [--cache DIR] [--set NAME=VALUE ...]
 """
 
@@ -75,7 +76,8 @@ def survey(folder: Path, args: argparse.Namespace) -> Survey:
     made = simulate_survey(folder / 'truth', scene, seed=11, spacing=args.spacing, noise=0.002,
                            falloff=args.falloff, aspect=args.aspect,
                            overhead=args.overhead, footprint=args.footprint,
-                           registration=args.registration)  # fmt: skip
+                           registration=args.registration,
+                           noise_growth=args.noise_growth)  # fmt: skip
     path.write_bytes(pickle.dumps(made))
     return made
 
@@ -117,6 +119,9 @@ def run() -> None:
     parser.add_argument('--registration', type=float, default=0.0,
                         help="each scanner position's points shifted together by a draw of "
                         'this standard deviation along each axis [m]')  # fmt: skip
+    parser.add_argument('--noise-growth', type=float, default=0.0,
+                        help='the 2 mm range noise grows as (range / nearest range) to this '
+                        'power')  # fmt: skip
     parser.add_argument('--formats', nargs='+', default=['ply', 'xyz', 'laz'],
                         choices=['ply', 'xyz', 'laz'],
                         help='files to run (a dense cloud: one)')  # fmt: skip
@@ -144,6 +149,8 @@ def run() -> None:
         folder = folder.with_name(f'{folder.name}_footprint{args.footprint:g}')
     if args.registration:
         folder = folder.with_name(f'{folder.name}_registration{args.registration:g}')
+    if args.noise_growth:
+        folder = folder.with_name(f'{folder.name}_noisegrowth{args.noise_growth:g}')
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     s = survey(folder, args)

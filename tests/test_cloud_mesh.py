@@ -342,6 +342,20 @@ def test_each_scan_is_shifted_by_its_own_registration_error(survey, tmp_path) ->
     assert s.truth['scene']['survey']['mixed_pixels'] == 0
 
 
+def test_range_noise_grows_with_range(survey, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    _, clean = survey
+    pile = PileConfig(rocks=30, gradation=parse_gradation('0.12:0.3'))
+    s = simulate_survey(tmp_path / 'truth', pile, seed=1, spacing=0.01, noise=0.002,
+                        noise_growth=2.0)  # fmt: skip
+    # The same draws, scaled up with range along each point's normal: by more than the nearest
+    # point's noise where the pile lies farthest from every scanner position.
+    extra = s.points - clean.points
+    assert np.allclose(np.cross(extra, s.normals), 0.0, atol=1e-8)
+    along = np.einsum('ij,ij->i', extra, s.normals)
+    assert np.std(along) > 0.25 * 0.002 and np.abs(along).max() > 2 * 0.002
+    assert s.truth['scene']['survey']['noise_growth'] == 2.0
+
+
 def test_which_side_is_up_without_normals(survey) -> None:  # type: ignore[no-untyped-def]
     _, s = survey
     truth = s.survey_to_pile.rotation.T @ np.array([0.0, 0.0, 1.0])

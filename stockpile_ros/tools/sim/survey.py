@@ -73,6 +73,7 @@ def simulate_survey(
     seed: int = 0,
     spacing: float = 0.01,
     noise: float = 0.002,
+    noise_growth: float = 0.0,
     falloff: float = 0.0,
     aspect: float = 1.0,
     overhead: bool = True,
@@ -89,6 +90,10 @@ def simulate_survey(
         seed: Random seed of the pile, the samples and the noise.
         spacing: Median distance between neighbouring points, about [m].
         noise: Standard deviation of the range noise, along each point's normal [m].
+        noise_growth: The noise grows with range as ``(d / d_min) ** noise_growth``, ``d`` a
+            point's distance to the nearest scanner position: ``noise`` is the nearest point's,
+            and 1 or 2 make the far side of the pile several times noisier, as a phone's depth
+            or a scanner beyond its best range is (0: the same everywhere).
         falloff: Each point is kept with probability ``(d_min / d) ** falloff``, ``d`` its
             distance to the nearest scanner position: 2 thins the points with range as a
             scanner's angular step does (its density falls as the range squared), so that
@@ -154,7 +159,8 @@ def simulate_survey(
         'units': 'm',
         'frame_id': 'pile',
         'seed': seed,
-        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'falloff': falloff,
+        'scene': {'survey': {'spacing': spacing, 'noise': noise, 'noise_growth': noise_growth,
+                             'falloff': falloff,
                              'aspect': aspect, 'overhead': overhead, 'footprint': footprint,
                              'mixed_pixels': mixed, 'registration': registration,
                              'tilt_deg': tilt_deg,
@@ -167,7 +173,11 @@ def simulate_survey(
         'gradation': to_json(gradation([r['b'] for r in truths], [r['mass'] for r in truths])),
     }  # fmt: skip
     write_truth(out, truth, scene)
-    points = sampled.points + rng.normal(0.0, noise, len(sampled.points))[:, None] * sampled.normals
+    spread = rng.normal(0.0, noise, len(sampled.points))
+    if noise_growth:
+        reach = np.min(np.linalg.norm(sampled.points[:, None] - eyes[None], axis=2), axis=1)
+        spread *= (reach / reach.min()) ** noise_growth
+    points = sampled.points + spread[:, None] * sampled.normals
     axis = rng.normal(size=3)
     axis[2] = 0.0
     axis /= np.linalg.norm(axis)
