@@ -6,6 +6,9 @@ and OFF through open3d, PLY headers checked against the file size first) and han
 
 - refused (:class:`~stockpile_ros.errors.MeshError`): no vertices or faces, non-finite vertices,
   face indices out of range, nothing left once degenerate and duplicate faces are dropped;
+- joined: in a mesh with more vertices than faces (stored face by face, as STL is), every
+  face's corners are pointed at the first vertex at their positions, so that faces border
+  each other;
 - dropped and counted: faces that repeat a vertex index or have zero area (their normals are
   undefined and their zero-length edges make edge-relative scales zero), and faces over the same
   three vertices as an earlier face, in any order (a tripled surface would be three rocks deep);
@@ -34,6 +37,7 @@ __all__ = [
     'check_mesh',
     'degenerate_faces',
     'duplicate_faces',
+    'join_vertices',
     'read_mesh',
 ]
 
@@ -123,6 +127,22 @@ def degenerate_faces(
     return np.asarray(repeated | (twice_area <= _ZERO_HEIGHT * longest), dtype=bool)
 
 
+def join_vertices(
+    vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]
+) -> tuple[npt.NDArray[np.int64], int]:
+    """Point each face's corners at the first vertex at their positions (exactly equal).
+
+    Returns:
+        The faces so pointed, and how many of the vertices they used before are no longer used
+        (the vertices themselves are kept, so vertex-indexed data stays aligned).
+
+    """
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    to = np.asarray(first[inverse.ravel()], dtype=np.int64)
+    used = np.unique(faces)
+    return to[faces], int(np.count_nonzero(to[used] != used))
+
+
 def duplicate_faces(faces: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
     """Mask of faces over the three vertices of an earlier face (in any order)."""
     repeated = np.ones(len(faces), dtype=bool)
@@ -192,6 +212,12 @@ def check_mesh(
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * scale
     faces = np.asarray(mesh.faces, dtype=np.int64)
     check_arrays(vertices, faces, source)
+    joined = 0
+    if len(vertices) > len(faces):
+        # More vertices than faces: stored face by face (STL), with no corner shared. Each
+        # face's corners go to the first vertex at their positions, or no face would border
+        # another and every face would be a region of its own.
+        faces, joined = join_vertices(vertices, faces)
     degenerate = degenerate_faces(vertices, faces)
     kept = np.flatnonzero(~degenerate)
     unique = kept[~duplicate_faces(faces[kept])]
@@ -212,6 +238,11 @@ def check_mesh(
         len(unique), units, scale, extent, edge, plausible,
         None if plausible else _likely_units(extent, edge, scale),
     )  # fmt: skip
+    if joined:
+        check.warnings.append(
+            f'{joined} vertices joined to the vertex before them at the same position (a mesh '
+            'stored face by face, as STL is)'
+        )
     if check.degenerate_faces:
         check.warnings.append(
             f'{check.degenerate_faces} degenerate faces dropped (repeated vertex or zero area)'

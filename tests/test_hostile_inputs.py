@@ -335,6 +335,21 @@ def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_res
     assert len(tripled.rocks) == len(clean.rocks) > 0
 
 
+def test_a_mesh_stored_face_by_face_is_joined_and_gives_the_clean_result(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # As STL stores a mesh: three vertices of its own for every face, none shared. Unjoined, no
+    # face bordered another, and the run found no rock.
+    v, f, _ = small_pile()
+    _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
+    apart = _ply(tmp_path / 'apart.ply', v[f.ravel()], np.arange(3 * len(f)).reshape(-1, 3))
+    _, err, joined = _segment(capsys, apart, tmp_path / 'j')
+    assert f'{3 * len(f) - len(np.unique(f))} vertices joined' in err
+    assert _check(joined).faces_kept == len(f)
+    assert _rocks(joined) == pytest.approx(_rocks(clean))
+    assert len(joined.rocks) == len(clean.rocks) > 0
+
+
 def test_many_zero_length_edges_do_not_hang_the_segmentation(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
