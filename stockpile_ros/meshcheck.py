@@ -27,7 +27,14 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import MeshError, reading
-from .meshio import LabelledMesh, check_arrays, check_ply_size, read_labelled_mesh, read_ply_header
+from .meshio import (
+    LabelledMesh,
+    check_arrays,
+    check_ply_size,
+    read_labelled_mesh,
+    read_obj,
+    read_ply_header,
+)
 
 __all__ = [
     'PLAUSIBLE_EDGE_M',
@@ -285,9 +292,10 @@ def _read_with_open3d(path: Path) -> LabelledMesh:
 def read_mesh(path: str | Path, units: str = 'm') -> tuple[LabelledMesh, MeshCheck]:
     """Read a mesh file and :func:`check_mesh` it.
 
-    Binary PLY goes through :func:`~stockpile_ros.meshio.read_labelled_mesh` (labels kept);
-    ASCII PLY has its header checked against the file size before open3d reads it; other formats
-    (OBJ, STL, OFF) are read by open3d.
+    Binary PLY goes through :func:`~stockpile_ros.meshio.read_labelled_mesh` (labels kept) and
+    OBJ through :func:`~stockpile_ros.meshio.read_obj` (faces of more than three corners cut
+    into triangles by both); ASCII PLY has its header checked against the file size before
+    open3d reads it; STL and OFF are read by open3d.
 
     Args:
         path: The mesh file.
@@ -309,6 +317,12 @@ def read_mesh(path: str | Path, units: str = 'm') -> tuple[LabelledMesh, MeshChe
             check_ply_size(header, len(raw), path)
             del raw
             mesh = _read_with_open3d(path) if header.format == 'ascii' else read_labelled_mesh(path)
+        elif path.suffix.lower() == '.obj':
+            obj = read_obj(path)
+            faces = obj.faces
+            mesh = LabelledMesh(
+                obj.vertices, faces, np.zeros(len(faces), dtype=np.int32), obj.colors
+            )
         else:
             mesh = _read_with_open3d(path)
     return check_mesh(mesh, path, units)

@@ -2,6 +2,8 @@
 
 open3d's PLY writer keeps no per-face properties, so this small reader/writer does: vertices with
 optional colours, faces with an ``int rock_id``. MeshLab, CloudCompare and Blender open these files.
+Faces of more than three corners (Blender's PLY and OBJ keep quads and n-gons) are cut into
+triangles fanning from their first corner, here and in :func:`read_obj`.
 """
 
 from __future__ import annotations
@@ -18,11 +20,15 @@ from .errors import MeshError
 __all__ = [
     'LabelledMesh',
     'MeshError',
+    'ObjFile',
     'PlyElement',
     'PlyHeader',
     'check_arrays',
     'check_ply_size',
+    'eight_bit',
+    'fan_triangles',
     'read_labelled_mesh',
+    'read_obj',
     'read_ply_header',
     'write_labelled_mesh',
 ]
@@ -229,11 +235,11 @@ def check_ply_size(header: PlyHeader, size: int, source: str | Path) -> None:
         )
 
 
-def _dtype(element: PlyElement, order: str) -> np.dtype[np.void]:
+def _dtype(element: PlyElement, order: str, sides: int = 3) -> np.dtype[np.void]:
     fields: list[tuple[str, str] | tuple[str, str, tuple[int]]] = []
     for name, kind in element.properties:
         typ = kind if kind.endswith('1') else order + kind
-        fields.append((name, typ, (3,)) if name == 'v' else (name, typ))
+        fields.append((name, typ, (sides,)) if name == 'v' else (name, typ))
     try:
         return np.dtype(fields)
     except (ValueError, TypeError) as exc:  # duplicate property names
@@ -272,6 +278,191 @@ def check_arrays(
         )
 
 
+def fan_triangles(
+    corners: npt.NDArray[np.int64], sides: npt.NDArray[np.int64], source: str | Path
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Cut polygons into triangles fanning from each one's first corner.
+
+    Args:
+        corners: Every polygon's vertex indices, one polygon after the other.
+        sides: Each polygon's number of corners.
+        source: The file, for messages.
+
+    Returns:
+        The triangles (Kx3) and, for each, the polygon it came from.
+
+    Raises:
+        MeshError: A polygon of fewer than three corners.
+
+    """
+    short = np.flatnonzero(sides < 3)
+    if len(short):
+        raise MeshError(
+            f'{source}: {len(short)} faces have fewer than 3 corners (first: face '
+            f'{int(short[0])}, {int(sides[short[0]])})'
+        )
+    if len(sides) and int(sides.max()) == 3 == int(sides.min()):
+        return corners.reshape(-1, 3), np.arange(len(sides))
+    start = np.cumsum(sides) - sides
+    count = sides - 2
+    polygon = np.repeat(np.arange(len(sides)), count)
+    # The k-th triangle of a polygon takes its first corner and corners k + 1 and k + 2.
+    k = np.arange(len(polygon)) - np.repeat(np.cumsum(count) - count, count)
+    first = start[polygon]
+    faces = np.stack([corners[first], corners[first + k + 1], corners[first + k + 2]], axis=1)
+    return faces.astype(np.int64), polygon
+
+
+def _ply_faces(
+    raw: bytes, offset: int, element: PlyElement, order: str, source: str | Path
+) -> tuple[npt.NDArray[np.void], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], int]:
+    """Read a binary face element whose faces may have any number of corners.
+
+    Returns:
+        The element's scalar properties per face, its corners and corner counts (see
+        :func:`fan_triangles`), and the offset after it.
+
+    """
+    if element.count == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=_dtype(element, order)), (empty, empty), offset
+    # Most files hold one kind of polygon: read them all at once with the first face's count.
+    count_type = dict(element.properties)['n']
+    first = np.frombuffer(raw, dtype=order + count_type if count_type[-1] != '1' else count_type,
+                          count=1, offset=offset + _prefix(element, order))  # fmt: skip
+    dtype = _dtype(element, order, max(int(first[0]), 1))
+    if offset + dtype.itemsize * element.count <= len(raw):
+        data = np.frombuffer(raw, dtype=dtype, count=element.count, offset=offset)
+        if np.all(data['n'] == first[0]):
+            corners = np.asarray(data['v'], dtype=np.int64).reshape(-1)
+            sides = np.asarray(data['n'], dtype=np.int64)
+            return data, (corners, sides), offset + dtype.itemsize * element.count
+    return _ply_mixed_faces(raw, offset, element, order, source)
+
+
+def _prefix(element: PlyElement, order: str) -> int:
+    """Bytes of a face's properties before its corner count."""
+    size = 0
+    for name, kind in element.properties:
+        if name == 'n':
+            return size
+        size += np.dtype(kind if kind.endswith('1') else order + kind).itemsize
+    return size
+
+
+def _ply_mixed_faces(
+    raw: bytes, offset: int, element: PlyElement, order: str, source: str | Path
+) -> tuple[npt.NDArray[np.void], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], int]:
+    """Read a face element of polygons of several sizes, one face after the other."""
+    kinds = [(name, np.dtype(kind if kind.endswith('1') else order + kind))
+             for name, kind in element.properties]  # fmt: skip
+    scalars = [(name, kind) for name, kind in kinds if name not in ('n', 'v')]
+    values: dict[str, list[float]] = {name: [] for name, _ in scalars}
+    corners: list[npt.NDArray[np.int64]] = []
+    sides = np.zeros(element.count, dtype=np.int64)
+    at = offset
+    try:
+        for face in range(element.count):
+            n = 0
+            for name, kind in kinds:
+                if name == 'v':
+                    corners.append(np.frombuffer(raw, dtype=kind, count=n, offset=at))
+                    at += kind.itemsize * n
+                    continue
+                value = np.frombuffer(raw, dtype=kind, count=1, offset=at)[0]
+                at += kind.itemsize
+                if name == 'n':
+                    n = int(value)
+                    sides[face] = n
+                else:
+                    values[name].append(value)
+    except ValueError:
+        raise MeshError(
+            f'{source}: PLY face element ends before its {element.count} faces do (truncated)'
+        ) from None
+    data = np.zeros(element.count, dtype=np.dtype([(name, kind) for name, kind in scalars]))
+    for name, _ in scalars:
+        data[name] = values[name]
+    flat = np.concatenate(corners).astype(np.int64) if corners else np.zeros(0, dtype=np.int64)
+    return data, (flat, sides), at
+
+
+def eight_bit(values: npt.ArrayLike) -> npt.NDArray[np.uint8]:
+    """Colours as 8 bits: 0..1 floats scaled by 255, 16-bit channels shifted down."""
+    v = np.asarray(values, dtype=np.float64)
+    top = float(v.max()) if v.size else 0.0
+    if top <= 1.0 and not np.all(v == np.round(v)):
+        v = v * 255.0
+    elif top > 255.0:
+        v = v / 257.0
+    return np.asarray(np.clip(np.round(v), 0, 255), dtype=np.uint8)
+
+
+@dataclass
+class ObjFile:
+    """What a Wavefront OBJ file holds of a mesh or a cloud.
+
+    Attributes:
+        vertices: Nx3 positions (``v``).
+        colors: Nx3 colours following the positions (:func:`eight_bit`), or None unless every
+            vertex has one.
+        normals: The ``vn`` normals in file order, or None.
+        faces: Kx3 triangles (``f``; polygons fanned from their first corner), 0-based.
+
+    """
+
+    vertices: npt.NDArray[np.float64]
+    colors: npt.NDArray[np.uint8] | None
+    normals: npt.NDArray[np.float64] | None
+    faces: npt.NDArray[np.int64]
+
+
+def read_obj(path: str | Path) -> ObjFile:
+    """Read the vertices, colours, normals and faces of an OBJ file.
+
+    Groups, materials and texture coordinates are ignored; a negative index counts back from
+    the last vertex read.
+
+    Raises:
+        MeshError: A face index that is not a number.
+        OSError: The file cannot be read.
+
+    """
+    points: list[list[float]] = []
+    colors: list[list[float]] = []
+    normals: list[list[float]] = []
+    corners: list[int] = []
+    sides: list[int] = []
+    with Path(path).open('r', errors='replace') as stream:
+        for number, line in enumerate(stream, start=1):
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == 'v' and len(words) >= 4:
+                points.append([float(w) for w in words[1:4]])
+                if len(words) >= 7:
+                    colors.append([float(w) for w in words[4:7]])
+            elif words[0] == 'vn' and len(words) >= 4:
+                normals.append([float(w) for w in words[1:4]])
+            elif words[0] == 'f':
+                try:
+                    face = [int(w.split('/')[0]) for w in words[1:]]
+                except ValueError:
+                    raise MeshError(
+                        f'{path}: line {number}: a face index is not a number'
+                    ) from None
+                corners += [i - 1 if i > 0 else len(points) + i for i in face]
+                sides.append(len(face))
+    faces, _ = fan_triangles(np.asarray(corners, dtype=np.int64),
+                             np.asarray(sides, dtype=np.int64), path)  # fmt: skip
+    return ObjFile(
+        np.asarray(points, dtype=np.float64).reshape(-1, 3),
+        eight_bit(colors) if colors and len(colors) == len(points) else None,
+        np.asarray(normals, dtype=np.float64) if normals else None,
+        faces,
+    )
+
+
 def read_labelled_mesh(path: str | Path) -> LabelledMesh:
     """Read a binary PLY triangle mesh, such as :func:`write_labelled_mesh` writes.
 
@@ -295,27 +486,26 @@ def read_labelled_mesh(path: str | Path) -> LabelledMesh:
     order = _PLY_ORDER[header.format]
     offset = header.body_offset
     data: dict[str, npt.NDArray[np.void]] = {}
+    polygons: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None
     for element in header.elements:
+        if element.name == 'face' and any(name == 'v' for name, _ in element.properties):
+            data['face'], polygons, offset = _ply_faces(raw, offset, element, order, path)
+            continue
         dtype = _dtype(element, order)
         data[element.name] = np.frombuffer(raw, dtype=dtype, count=element.count, offset=offset)
         offset += dtype.itemsize * element.count
     v, f = data['vertex'], data['face']
-    fnames = f.dtype.names or ()
-    if 'v' not in fnames:
+    if polygons is None:
         raise MeshError(f'{path}: PLY face element without a vertex index list')
-    sides = np.flatnonzero(f['n'] != 3)
-    if len(sides):
-        raise MeshError(
-            f'{path}: only triangle faces are supported (face {int(sides[0])} has '
-            f'{int(f["n"][sides[0]])} vertices)'
-        )
     names = v.dtype.names or ()
     colors = None
     if {'red', 'green', 'blue'} <= set(names):
         colors = np.stack([v['red'], v['green'], v['blue']], axis=1).astype(np.uint8)
+    fnames = f.dtype.names or ()
     labels = f['rock_id'] if 'rock_id' in fnames else np.zeros(len(f))
     vertices = np.stack([v['x'], v['y'], v['z']], axis=1).astype(np.float64)
-    faces = np.asarray(f['v'], dtype=np.int64)
+    faces, polygon = fan_triangles(*polygons, path)
+    labels = np.asarray(labels)[polygon]
     check_arrays(vertices, faces, path)
     return LabelledMesh(
         vertices=vertices,

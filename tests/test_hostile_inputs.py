@@ -18,7 +18,7 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
-from segment_fixtures import small_pile
+from segment_fixtures import height_field, small_pile
 
 from stockpile_ros.artefacts import load
 from stockpile_ros.bagio.writer import BagWriter
@@ -252,9 +252,16 @@ MESH_CASES: dict[str, tuple[Callable[[Path], Path], tuple[str, ...]]] = {
         ),
         ('claims 100000000 vertex', 'at least'),
     ),
-    'quads': (
+    'a face count that misaligns the faces': (
         lambda p: _edit_header(_ply(p, TETRA_V, TETRA_F), FIRST_FACE, b'\x04' + FIRST_FACE[1:]),
-        ('only triangle faces',),
+        ('faces have fewer than 3 corners',),
+    ),
+    'a face of two corners': (
+        lambda p: (
+            p.with_suffix('.obj').write_text('v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n')
+            and p.with_suffix('.obj')
+        ),
+        ('1 faces have fewer than 3 corners (first: face 1, 2)',),
     ),
     'all faces degenerate': (
         lambda p: _ply(p, [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2], [0, 0, 1]]),
@@ -340,7 +347,7 @@ def test_a_mesh_stored_face_by_face_is_joined_and_gives_the_clean_result(
 ) -> None:
     # As STL stores a mesh: three vertices of its own for every face, none shared. Unjoined, no
     # face bordered another, and the run found no rock.
-    v, f, _ = small_pile()
+    v, f = _two_boulders()
     _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
     apart = _ply(tmp_path / 'apart.ply', v[f.ravel()], np.arange(3 * len(f)).reshape(-1, 3))
     _, err, joined = _segment(capsys, apart, tmp_path / 'j')
@@ -348,6 +355,57 @@ def test_a_mesh_stored_face_by_face_is_joined_and_gives_the_clean_result(
     assert _check(joined).faces_kept == len(f)
     assert _rocks(joined) == pytest.approx(_rocks(clean))
     assert len(joined.rocks) == len(clean.rocks) > 0
+
+
+def _two_boulders() -> tuple[np.ndarray, np.ndarray]:
+    """Two boulders on flat ground, a grid of 120 x 120 vertices, no two at one position."""
+
+    def bumps(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        z = np.zeros_like(x)
+        for cx, cy, r in ((0.1, 0.0, 0.15), (-0.2, 0.2, 0.1)):
+            z = np.maximum(z, np.sqrt(np.clip(r**2 - (x - cx) ** 2 - (y - cy) ** 2, 0, None)))
+        return z
+
+    return height_field(bumps, 0.5, 120)
+
+
+def _polygon_ply(path: Path, vertices: np.ndarray, faces: list[list[int]]) -> Path:
+    """A binary PLY of polygons as Blender writes them, each face's rock_id after its corners."""
+    head = (f'ply\nformat binary_little_endian 1.0\nelement vertex {len(vertices)}\n'
+            'property float x\nproperty float y\nproperty float z\n'
+            f'element face {len(faces)}\nproperty list uchar int vertex_indices\n'
+            'property int rock_id\nend_header\n')  # fmt: skip
+    body = vertices.astype('<f4').tobytes() + b''.join(
+        struct.pack(f'<B{len(face)}ii', len(face), *face, 0) for face in faces
+    )
+    path.write_bytes(head.encode() + body)
+    return path
+
+
+def test_quads_and_polygons_are_cut_into_triangles(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    v, f = _two_boulders()
+    # The grid's squares, each written as the triangles a, b, c and a, c, d were.
+    half = len(f) // 2
+    quads = np.column_stack([f[:half], f[half:, 2]]).tolist()
+    _, _, triangles = _segment(capsys, _ply(tmp_path / 'tri.ply', v, f), tmp_path / 't')
+    assert len(triangles.rocks) >= 2
+    sizes = sorted(_rocks(triangles))
+    # Quads; quads and triangles mixed; an OBJ of quads with slashes and negative indices.
+    mixed = [face for q in quads[:40] for face in (q[:3], [q[0], q[2], q[3]])] + quads[40:]
+    obj = tmp_path / 'quads.obj'
+    obj.write_text(''.join(f'v {x} {y} {z}\nvt 0 0\n' for x, y, z in v)
+                   + ''.join('f ' + ' '.join(f'{i - len(v)}/1' for i in q) + '\n'
+                             for q in quads))  # fmt: skip
+    for name, mesh in (
+        ('quads', _polygon_ply(tmp_path / 'quads.ply', v, quads)),
+        ('mixed', _polygon_ply(tmp_path / 'mixed.ply', v, mixed)),
+        ('obj', obj),
+    ):
+        _, _, report = _segment(capsys, mesh, tmp_path / name)
+        assert _check(report).faces_kept == len(f), name
+        assert sorted(_rocks(report)) == pytest.approx(sizes, rel=1e-6), name
 
 
 def test_many_zero_length_edges_do_not_hang_the_segmentation(

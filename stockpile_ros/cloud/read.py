@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import MeshError, reading
-from ..meshio import check_ply_size, read_ply_header
+from ..meshio import check_ply_size, eight_bit, read_obj, read_ply_header
 
 __all__ = ['CLOUD_SUFFIXES', 'Cloud', 'is_mesh_file', 'read_cloud']
 
@@ -85,17 +85,6 @@ def _finish(cloud: Cloud) -> Cloud:
     return cloud
 
 
-def _eight_bit(values: npt.ArrayLike) -> U8:
-    """Colours as 8 bits: 0..1 floats scaled by 255, 16-bit channels shifted down."""
-    v = np.asarray(values, dtype=np.float64)
-    top = float(v.max()) if v.size else 0.0
-    if top <= 1.0 and not np.all(v == np.round(v)):
-        v = v * 255.0
-    elif top > 255.0:
-        v = v / 257.0
-    return np.asarray(np.clip(np.round(v), 0, 255), dtype=np.uint8)
-
-
 def is_mesh_file(path: str | Path) -> bool:
     """Whether ``path`` is read as a mesh: a PLY with faces (or no vertex), an OBJ with ``f`` lines.
 
@@ -136,31 +125,18 @@ def _read_ply(path: Path) -> Cloud:
     if len(points) == 0:
         raise MeshError(f'{path}: a PLY without points open3d can read')
     normals = np.asarray(pcd.normals, dtype=np.float64) if pcd.has_normals() else None
-    colors = _eight_bit(np.asarray(pcd.colors)) if pcd.has_colors() else None
+    colors = eight_bit(np.asarray(pcd.colors)) if pcd.has_colors() else None
     return Cloud(points, normals, colors, str(path), 'ply')
 
 
 def _read_obj(path: Path) -> Cloud:
-    points, normals, colors = [], [], []
-    with path.open('r', errors='replace') as stream:
-        for line in stream:
-            words = line.split()
-            if not words:
-                continue
-            if words[0] == 'v' and len(words) >= 4:
-                points.append([float(w) for w in words[1:4]])
-                if len(words) >= 7:
-                    colors.append([float(w) for w in words[4:7]])
-            elif words[0] == 'vn' and len(words) >= 4:
-                normals.append([float(w) for w in words[1:4]])
-    if not points:
+    obj = read_obj(path)
+    if not len(obj.vertices):
         raise MeshError(f'{path}: an OBJ without vertices')
-    cloud = Cloud(np.asarray(points), None, None, str(path), 'obj')
+    cloud = Cloud(obj.vertices, None, obj.colors, str(path), 'obj')
     # Without faces an OBJ has no vertex-normal pairing but their order: equal counts only.
-    if normals and len(normals) == len(points):
-        cloud.normals = np.asarray(normals)
-    if colors and len(colors) == len(points):
-        cloud.colors = _eight_bit(colors)
+    if obj.normals is not None and len(obj.normals) == len(obj.vertices):
+        cloud.normals = obj.normals
     return cloud
 
 
@@ -179,7 +155,7 @@ def _read_las(path: Path) -> Cloud:
     if {'red', 'green', 'blue'} <= names:
         rgb = np.column_stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)])
         if rgb.any():
-            colors = _eight_bit(rgb)
+            colors = eight_bit(rgb)
     normals = None
     extra = {n.lower(): n for n in las.point_format.extra_dimension_names}
     for keys in (('nx', 'ny', 'nz'), ('normalx', 'normaly', 'normalz'),
@@ -257,7 +233,7 @@ def _read_text(path: Path) -> Cloud:
     if {'nx', 'ny', 'nz'} <= cols.keys():
         cloud.normals = data[:, [cols['nx'], cols['ny'], cols['nz']]]
     if {'r', 'g', 'b'} <= cols.keys():
-        cloud.colors = _eight_bit(data[:, [cols['r'], cols['g'], cols['b']]])
+        cloud.colors = eight_bit(data[:, [cols['r'], cols['g'], cols['b']]])
     return cloud
 
 
