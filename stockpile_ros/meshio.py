@@ -211,8 +211,8 @@ def read_ply_header(raw: bytes, source: str | Path) -> PlyHeader:
 def check_ply_size(header: PlyHeader, size: int, source: str | Path) -> None:
     """Refuse a header that claims more items than ``size`` bytes can hold, before any allocation.
 
-    Binary bodies must hold every item in full (triangles: a count and three indices); an ASCII
-    value takes at least two bytes (a digit and a separator).
+    Binary bodies must hold every item in full (a face at least as a triangle: a count and three
+    indices); an ASCII value takes at least two bytes (a digit and a separator).
 
     Raises:
         MeshError: The header's counts do not fit in the file.
@@ -464,15 +464,17 @@ def read_obj(path: str | Path) -> ObjFile:
 
 
 def read_labelled_mesh(path: str | Path) -> LabelledMesh:
-    """Read a binary PLY triangle mesh, such as :func:`write_labelled_mesh` writes.
+    """Read a binary PLY mesh, such as :func:`write_labelled_mesh` writes.
 
-    Both byte orders are read; faces without a ``rock_id`` property get label 0. The header is
-    checked against the file's size before anything is allocated, and the arrays with
-    :func:`check_arrays`.
+    Both byte orders are read; faces without a ``rock_id`` property get label 0, and faces of
+    more than three corners are cut into triangles (:func:`fan_triangles`), each with its
+    face's label. The header is checked against the file's size before anything is allocated,
+    and the arrays with :func:`check_arrays`.
 
     Raises:
-        MeshError: Not a binary triangle PLY, a header that does not fit the file, or arrays
-            :func:`check_arrays` refuses; the text names the file and the fault.
+        MeshError: Not a binary PLY mesh, a header that does not fit the file, a face of fewer
+            than three corners, or arrays :func:`check_arrays` refuses; the text names the file
+            and the fault.
         OSError: The file cannot be read.
 
     """
