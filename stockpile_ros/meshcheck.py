@@ -1,7 +1,7 @@
 """One check for every mesh a command reads: structure, degenerate and duplicate faces, scale.
 
-:func:`read_mesh` reads a mesh file (binary PLY with this package's reader; ASCII PLY, OBJ, STL
-and OFF through open3d, PLY headers checked against the file size first) and hands it to
+:func:`read_mesh` reads a mesh file (binary PLY and OBJ with this package's readers; ASCII PLY,
+STL and OFF through open3d, PLY headers checked against the file size first) and hands it to
 :func:`check_mesh`, which refuses what no stage can use and cleans what would mislead one:
 
 - refused (:class:`~stockpile_ros.errors.MeshError`): no vertices or faces, non-finite vertices,
