@@ -235,10 +235,15 @@ def check_ply_size(header: PlyHeader, size: int, source: str | Path) -> None:
         )
 
 
+def _typed(kind: str, order: str) -> str:
+    """Return a PLY property's numpy type in the file's byte order (one-byte types have none)."""
+    return kind if kind.endswith('1') else order + kind
+
+
 def _dtype(element: PlyElement, order: str, sides: int = 3) -> np.dtype[np.void]:
     fields: list[tuple[str, str] | tuple[str, str, tuple[int]]] = []
     for name, kind in element.properties:
-        typ = kind if kind.endswith('1') else order + kind
+        typ = _typed(kind, order)
         fields.append((name, typ, (sides,)) if name == 'v' else (name, typ))
     try:
         return np.dtype(fields)
@@ -327,9 +332,8 @@ def _ply_faces(
         empty = np.zeros(0, dtype=np.int64)
         return np.zeros(0, dtype=_dtype(element, order)), (empty, empty), offset
     # Most files hold one kind of polygon: read them all at once with the first face's count.
-    count_type = dict(element.properties)['n']
-    first = np.frombuffer(raw, dtype=order + count_type if count_type[-1] != '1' else count_type,
-                          count=1, offset=offset + _prefix(element, order))  # fmt: skip
+    count_type = _typed(dict(element.properties)['n'], order)
+    first = np.frombuffer(raw, dtype=count_type, count=1, offset=offset + _prefix(element, order))
     dtype = _dtype(element, order, max(int(first[0]), 1))
     if offset + dtype.itemsize * element.count <= len(raw):
         data = np.frombuffer(raw, dtype=dtype, count=element.count, offset=offset)
@@ -346,7 +350,7 @@ def _prefix(element: PlyElement, order: str) -> int:
     for name, kind in element.properties:
         if name == 'n':
             return size
-        size += np.dtype(kind if kind.endswith('1') else order + kind).itemsize
+        size += np.dtype(_typed(kind, order)).itemsize
     return size
 
 
@@ -354,8 +358,7 @@ def _ply_mixed_faces(
     raw: bytes, offset: int, element: PlyElement, order: str, source: str | Path
 ) -> tuple[npt.NDArray[np.void], tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], int]:
     """Read a face element of polygons of several sizes, one face after the other."""
-    kinds = [(name, np.dtype(kind if kind.endswith('1') else order + kind))
-             for name, kind in element.properties]  # fmt: skip
+    kinds = [(name, np.dtype(_typed(kind, order))) for name, kind in element.properties]
     scalars = [(name, kind) for name, kind in kinds if name not in ('n', 'v')]
     values: dict[str, list[float]] = {name: [] for name, _ in scalars}
     corners: list[npt.NDArray[np.int64]] = []

@@ -219,9 +219,10 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_from_args(args)
     info: MeshInfo | None
     levelled = False
+    mesh_file = is_mesh_file(args.mesh)
     # Another tool's mesh: no --mesh-info says what made it.
-    foreign = is_mesh_file(args.mesh) and args.mesh_info is None
-    if not is_mesh_file(args.mesh):
+    foreign = mesh_file and args.mesh_info is None
+    if not mesh_file:
         if args.mesh_info is not None:
             raise StockpileError('--mesh-info goes with a mesh; a point cloud is meshed here')
         mesh, check, info = _from_cloud(args, settings)

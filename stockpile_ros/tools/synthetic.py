@@ -23,6 +23,7 @@ __all__ = [
     'make_pile',
     'poisson_mesh',
     'sample_scene',
+    'seen_from',
     'truth_face_labels',
 ]
 
@@ -292,17 +293,35 @@ def sample_scene(
     points, normals = np.concatenate(pts_all), np.concatenate(nrm_all)
     point_labels = np.concatenate(lab_all)
     if viewpoints is not None:
-        everything = o3d.t.geometry.RaycastingScene()
-        everything.add_triangles(
-            o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(f[labels > 0].astype(np.uint32))
-        )
-        seen = np.zeros(len(points), dtype=bool)
-        start = points + normals * 1e-4
-        for eye in np.asarray(viewpoints, dtype=np.float64):
-            ray = eye - start
-            dist = np.linalg.norm(ray, axis=1)
-            rays = np.hstack([start, ray / dist[:, None]]).astype(np.float32)
-            hit = everything.cast_rays(o3d.core.Tensor(rays))['t_hit'].numpy()
-            seen |= (hit >= dist) & (np.einsum('ij,ij->i', ray, normals) > 0)
+        seen = seen_from(v, f[labels > 0], points, normals, viewpoints).any(axis=1)
         points, normals, point_labels = points[seen], normals[seen], point_labels[seen]
     return SyntheticPile([], points, normals, point_labels)
+
+
+def seen_from(
+    vertices: F64, faces: npt.NDArray[np.int64], points: F64, normals: F64, viewpoints: F64
+) -> npt.NDArray[np.bool_]:
+    """Whether each point (row) is seen from each viewpoint (column).
+
+    A point is seen from a viewpoint on the outer side of its surface (along its unit normal)
+    when no triangle of ``vertices`` and ``faces`` (what can hide it: the rocks) lies between.
+    """
+    import open3d
+
+    o3d: Any = open3d
+
+    hiding = o3d.t.geometry.RaycastingScene()
+    hiding.add_triangles(
+        o3d.core.Tensor(np.asarray(vertices).astype(np.float32)),
+        o3d.core.Tensor(np.asarray(faces).astype(np.uint32)),
+    )
+    eyes = np.asarray(viewpoints, dtype=np.float64)
+    seen = np.zeros((len(points), len(eyes)), dtype=bool)
+    start = points + normals * 1e-4
+    for k, eye in enumerate(eyes):
+        ray = eye - start
+        dist = np.linalg.norm(ray, axis=1)
+        rays = np.hstack([start, ray / dist[:, None]]).astype(np.float32)
+        hit = hiding.cast_rays(o3d.core.Tensor(rays))['t_hit'].numpy()
+        seen[:, k] = (hit >= dist) & (np.einsum('ij,ij->i', ray, normals) > 0)
+    return seen

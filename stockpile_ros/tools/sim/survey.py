@@ -29,7 +29,7 @@ from ...ros import messages as m
 from ...ros.outputs import pointcloud2
 from ...segment.gradation import gradation
 from ..evaluation import EvaluationError, evaluate_sides, load_result, load_truth
-from ..synthetic import SyntheticPile, sample_scene
+from ..synthetic import SyntheticPile, sample_scene, seen_from
 from .bed import BedConfig, build_bed
 from .pile import PileConfig, build_pile
 from .truth import SPECIFIC_GRAVITY, TRUTH_SCHEMA, rock_truth, scene_mesh, write_truth
@@ -143,7 +143,7 @@ def simulate_survey(
     _, first = np.unique(cells, axis=0, return_index=True)
     if falloff > 0:
         # Thinned at random, not on a coarser grid: gaps and clumps, as where stations overlap.
-        eye = np.min(np.linalg.norm(dense.points[first, None] - eyes[None], axis=2), axis=1)
+        eye = _nearest(dense.points[first], eyes)
         first = first[rng.random(len(first)) < (eye.min() / eye) ** falloff]
     sampled = SyntheticPile([], dense.points[first], dense.normals[first], dense.labels[first])
     mixed = 0
@@ -175,8 +175,8 @@ def simulate_survey(
     write_truth(out, truth, scene)
     spread = rng.normal(0.0, noise, len(sampled.points))
     if noise_growth:
-        reach = np.min(np.linalg.norm(sampled.points[:, None] - eyes[None], axis=2), axis=1)
-        spread *= (reach / reach.min()) ** noise_growth
+        ranges = _nearest(sampled.points, eyes)
+        spread *= (ranges / ranges.min()) ** noise_growth
     points = sampled.points + spread[:, None] * sampled.normals
     axis = rng.normal(size=3)
     axis[2] = 0.0
@@ -191,6 +191,11 @@ def simulate_survey(
         survey_to_pile=to_pile,
         truth=truth,
     )
+
+
+def _nearest(points: F64, eyes: F64) -> F64:
+    """Return each point's distance to the nearest scanner position [m]."""
+    return np.asarray(np.min(np.linalg.norm(points[:, None] - eyes[None], axis=2), axis=1))
 
 
 def _scanned(
@@ -225,14 +230,9 @@ def _scanned(
             np.int64
         )
 
-    points, normals = sampled.points, sampled.normals
-    start = points + normals * 1e-4
-    seen = np.zeros((len(points), len(eyes)), dtype=bool)
-    for k, eye in enumerate(eyes):
-        ray = eye - start
-        dist = np.linalg.norm(ray, axis=1)
-        t_hit, _ = cast(start, ray / dist[:, None])
-        seen[:, k] = (t_hit >= dist) & (np.einsum('ij,ij->i', ray, normals) > 0)
+    points = sampled.points
+    rocks = scene.labels > 0
+    seen = seen_from(scene.vertices, scene.faces[rocks], points, sampled.normals, eyes)
     station = np.argmax(rng.random(seen.shape) * seen, axis=1)
     eye = eyes[station]
     out = points.copy()
