@@ -56,7 +56,11 @@ interest is F times the material's smallest b, so that the bed's smaller rocks a
 it, as a gravel bar's are under what its survey resolves: they are scored as the barely visible
 ones are (neither missed nor, found alone, counted either way; ``score_labels``' ``min_b``), the
 recall and ``D50 vis`` are over the rocks at or above it, and a line under the row counts the
-reported rocks made of several fines (false rocks). The beds and their meshed surfaces are
+reported rocks made of several fines (false rocks). With ``--search-floor`` no smallest rock is
+given and the floor is searched as for another tool's mesh (``settle_floor``), ``floor`` giving
+the one kept in median edge lengths (``!`` where the sizes still pile up against it); with
+``--floor 0`` no smallest rock is given and the floor stays at ``segment.min_rock_edges``, which
+is what another tool's mesh had before the search. The beds and their meshed surfaces are
 kept under ``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings
 meshes each surface once.
 
@@ -96,7 +100,11 @@ from stockpile_ros.segment.measure import (  # noqa: E402
     split_sheets,
 )
 from stockpile_ros.segment.params import SegmentParams  # noqa: E402
-from stockpile_ros.segment.pipeline import segment_and_measure, truncation_warnings  # noqa: E402
+from stockpile_ros.segment.pipeline import (  # noqa: E402
+    segment_and_measure,
+    settle_floor,
+    truncation_warnings,
+)
 from stockpile_ros.segment.qa import ReportOptions, bootstrap_intervals  # noqa: E402
 from stockpile_ros.segment.segmentation import Segmentation  # noqa: E402
 from stockpile_ros.tools.evaluation.labels import (  # noqa: E402
@@ -265,9 +273,16 @@ def main() -> None:
         help="smallest rock of interest [the material's smallest b]: over 1, the bed's smaller "
         'rocks are fines under it, scored as barely visible ones',
     )
+    parser.add_argument(
+        '--search-floor',
+        action='store_true',
+        help="no smallest rock given: the floor searched as for another tool's mesh",
+    )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
     args = parser.parse_args()
+    if args.search_floor and args.steps:
+        parser.error('--steps follows one segmentation; --search-floor runs several')
     args.cache.mkdir(parents=True, exist_ok=True)
     overrides = {k: ast.literal_eval(v) for k, v in (s.split('=', 1) for s in args.set)}
     normals = f'from {args.normal_neighbours} points' if args.normal_neighbours else 'true'
@@ -285,21 +300,25 @@ def main() -> None:
         cost = []
         for across in args.edges:
             surface = surveyed(placed, material, across, args)
+            smallest = 0.0 if args.search_floor else args.floor * lo
             params = SegmentParams.preset(
-                'default', **{'min_rock_b': args.floor * lo, 'max_rock_b': hi, **overrides}
+                'default', **{'min_rock_b': smallest, 'max_rock_b': hi, **overrides}
             )
             steps: list[tuple[str, np.ndarray]] = []
             t0 = time.process_time()
-            measured = segment_and_measure(
-                surface.vertices,
-                surface.faces,
-                params,
-                MeasureParams(),
-                # Copies: a step's labels are read while it runs, not kept.
-                on_step=(lambda name, labels, kept=steps: kept.append((name, labels.copy())))
-                if args.steps
-                else None,
-            )
+            if args.search_floor:
+                measured, _ = settle_floor(surface.vertices, surface.faces, params, MeasureParams())
+            else:
+                measured = segment_and_measure(
+                    surface.vertices,
+                    surface.faces,
+                    params,
+                    MeasureParams(),
+                    # Copies: a step's labels are read while it runs, not kept.
+                    on_step=(lambda name, labels, kept=steps: kept.append((name, labels.copy())))
+                    if args.steps
+                    else None,
+                )
             seg, rocks = measured.segmentation, measured.rocks
             seconds = time.process_time() - t0
             truth = {
@@ -319,6 +338,8 @@ def main() -> None:
             # rock given: --set min_rock_b=0).
             cut = truncation_warnings(seg.scale, [r.b for r in rocks], 'm')
             floor = 'cuts' if cut else '-'
+            if args.search_floor:
+                floor = f'{seg.params.min_rock_edges:.3g}{"!" if cut else ""}'
             lo_d50, hi_d50 = bootstrap_intervals(
                 [r.b for r in rocks], [r.mass for r in rocks], 0.0
             ).mass['d50']

@@ -25,6 +25,7 @@ from .segment.provenance import Provenance
 __all__ = [
     'Basis',
     'ClassDecision',
+    'FloorTry',
     'GradationCurve',
     'GradationRecord',
     'Intervals',
@@ -303,6 +304,27 @@ class MeasureRecord(MeasureParams):
     fer: str = 'a / c'
 
 
+@dataclass(frozen=True)
+class FloorTry:
+    """One floor tried for the smallest rock a mesh resolves (``segment.pipeline.settle_floor``).
+
+    Attributes:
+        edges: The floor [median edge lengths] (``SegmentParams.min_rock_edges``).
+        min_rock_b: The same in the mesh's units.
+        bands: Rocks measured at it, by b in bands a factor sqrt 2 wide from ``min_rock_b`` up
+            (the first with any under it).
+        cut: Whether the sizes pile up against it (``truncation_warnings``).
+        kept: Whether it is the floor the result holds.
+
+    """
+
+    edges: float
+    min_rock_b: float
+    bands: list[int]
+    cut: bool
+    kept: bool = False
+
+
 @dataclass(frozen=True, kw_only=True)
 class SegmentationRecord(SegmentParams):
     """The segmentation parameters used (every ``segment.*`` field) and what came of them.
@@ -314,6 +336,8 @@ class SegmentationRecord(SegmentParams):
         rocks_measured: Rocks measured (segments too small or flat are not).
         seconds: Time of the segmentation and the measurement of its rocks [s].
         measure: The measurement parameters.
+        floors: The floors tried, in order, for a mesh nothing vouches for (another tool's);
+            ``min_rock_edges`` is the one kept. Empty where none was searched.
 
     """
 
@@ -323,6 +347,7 @@ class SegmentationRecord(SegmentParams):
     rocks_measured: int
     seconds: float
     measure: MeasureRecord
+    floors: list[FloorTry] = field(default_factory=list)
 
 
 @dataclass

@@ -457,7 +457,9 @@ def test_a_foreign_mesh_is_levelled_unless_it_is_in_the_stockpile_frame(tmp_path
     assert [r.b for r in kept.rocks] == pytest.approx(upright, rel=1e-3)
 
 
-def test_another_tools_mesh_is_told_where_its_floor_comes_from(tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_another_tools_mesh_has_its_floor_searched_unless_something_vouches_for_it(
+    tmp_path,
+) -> None:  # type: ignore[no-untyped-def]
     from segment_fixtures import height_field
 
     from stockpile_ros.artefacts import MeshInfo, ScaleRecord, save
@@ -470,22 +472,28 @@ def test_another_tools_mesh_is_told_where_its_floor_comes_from(tmp_path) -> None
     path = tmp_path / 'mesh.ply'
     write_labelled_mesh(path, LabelledMesh(v, f, np.zeros(len(f), dtype=np.int32)))
 
-    def notes(*flags: str) -> list[str]:
+    def run(*flags: str) -> Report:
         out = tmp_path / f'out{len(list(tmp_path.iterdir()))}'
         assert main(['segment', str(path), '--out', str(out), *flags]) == 0
-        warnings = load(Report, out / 'report.json').warnings
-        return [w for w in warnings if 'the floor fitted on meshes made from photos' in w]
+        return load(Report, out / 'report.json')
 
-    # Another tool's mesh: its floor of 20 edges is said to be the one for meshes from photos.
-    (note,) = notes('--units', 'm')
-    assert 'taken as 20 median edge lengths' in note and 'segment.min_rock_edges lower' in note
-    # Its floor set explicitly, a smallest rock above the floor given, or this project's own
-    # mesh (with its mesh.json): nothing to say.
-    assert notes('--units', 'm', '--set', 'segment.min_rock_edges=20') == []
-    assert notes('--units', 'm', '--set', 'segment.min_rock_b=0.4') == []
+    # Another tool's mesh: its floor is searched; one rock falls off at the first, kept.
+    report = run('--units', 'm')
+    (tried,) = report.segmentation.floors
+    assert tried.edges == 20.0 and tried.kept and not tried.cut
+    assert not any('segment.min_rock_edges' in w for w in report.warnings)
+    # Its floor set explicitly, a smallest rock given, or this project's own mesh (with its
+    # mesh.json): nothing searched; said only where the floor is above the smallest rock asked.
+    for flags in (('--set', 'segment.min_rock_edges=20'), ('--set', 'segment.min_rock_b=0.4')):
+        report = run('--units', 'm', *flags)
+        assert report.segmentation.floors == []
+        assert not any('segment.min_rock_edges' in w for w in report.warnings)
+    report = run('--units', 'm', '--set', 'segment.min_rock_b=0.05')
+    assert report.segmentation.floors == []
+    assert any('the smallest rock asked for (0.05 m) is under it' in w for w in report.warnings)
     info = tmp_path / 'mesh.json'
     save(MeshInfo(ScaleRecord('given', 1.0), units='m'), info)
-    assert notes('--mesh-info', str(info)) == []
+    assert run('--mesh-info', str(info)).segmentation.floors == []
 
 
 def test_a_levelled_mesh_of_a_heap_over_little_ground_is_kept(tmp_path) -> None:  # type: ignore[no-untyped-def]

@@ -22,7 +22,7 @@ from ..errors import StockpileError
 from ..meshcheck import UNITS, MeshCheck, check_mesh, read_mesh
 from ..meshio import LabelledMesh
 from ..segment.adjacency import FaceGeometry, face_geometry
-from ..segment.params import RockScale, median_edge
+from ..segment.params import median_edge
 from ..segment.pipeline import analyse_mesh
 from ..segment.provenance import Provenance
 from ..segment.qa import report_options
@@ -190,30 +190,6 @@ def _level(mesh: LabelledMesh, settings: Settings, info: MeshInfo) -> bool:
     return True
 
 
-def _foreign_floor(scale: RockScale, edges: float, unit: str) -> list[str]:
-    """Say how another tool's mesh can resolve smaller rocks, where its floor set the smallest.
-
-    The floor (``segment.min_rock_edges``) was fitted on meshes from photos, whose noise cuts
-    rocks into pieces up to about its size; a mesh clean at the scale of its edges resolves
-    smaller rocks, and nothing in a mesh says which it is. Measured (README, 2026-12-07): a
-    simulated gravel bar's Poisson mesh of its scanned cloud, given as a mesh, found 0.30 of its
-    rocks at 20 edges (D50 +24 %), 0.88 at 10 and 0.95 at 8 (+4.7 %); the five reconstructed
-    piles' meshes from photos at 10 and 8 reported 1-7 false rocks for each one found.
-    """
-    if scale.source != 'mesh' and scale.requested >= scale.min_rock_b:
-        return []
-    return [
-        f'The smallest rock this mesh resolves was taken as {edges:g} median edge lengths '
-        f'({scale.min_rock_b:.3g} {unit}; segment.min_rock_edges), the floor fitted on meshes made '
-        'from photos, whose noise cuts rocks into pieces up to about that size. A mesh that is '
-        "clean at the scale of its edges, as a Poisson mesh of a scanner's cloud is, resolves "
-        'smaller rocks: give the cloud itself (its floor is cloud.min_rock_spacings point '
-        'spacings), or set segment.min_rock_edges lower (on a simulated gravel bar so meshed, 8 '
-        'found 0.95 of the rocks against 0.30 at 20; on meshes from photos, 8-10 reported 1-7 '
-        'false rocks for each one found).'
-    ]
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     settings = settings_from_args(args)
@@ -251,6 +227,7 @@ def run(args: argparse.Namespace) -> int:
         seg_params=cloud_segment_params(settings.segment, info, settings.explicit),
         measure_params=settings.measure,
         spec=spec, mesh_info=info, source=str(args.mesh), report_options=options,
+        search_floor=foreign and 'segment.min_rock_edges' not in settings.explicit,
     )  # fmt: skip
     report = analysis.report
     report.mesh.check = check
@@ -260,11 +237,6 @@ def run(args: argparse.Namespace) -> int:
         report.mesh.poisson = info.poisson or None
         report.mesh.model_to_stockpile = info.model_to_stockpile
     report.warnings[:0] = check.warnings
-    if foreign and 'segment.min_rock_edges' not in settings.explicit:
-        seg = analysis.segmentation
-        report.warnings += _foreign_floor(
-            seg.scale, seg.params.min_rock_edges, 'm' if report.metric else 'model units'
-        )
     provenance = Provenance.for_input(args.mesh, settings.values, defaults())
     keyframes = args.mesh.resolve().parent.parent / 'keyframes'
     write_result_folder(args.out, analysis, provenance, options, keyframes)

@@ -94,7 +94,10 @@ class SegmentParams:
             search's pieces of single rocks that no clean-up joins reach about this size
             (12-55 cm2, square roots of 9-19 edge lengths, on the demo pile): a class-derived
             ``min_rock_b`` of 12 edge lengths (class I on the demo pile, 3.8 mm edges) took the
-            result from 14 to 18 rocks there even with every other floor; 20 kept 14.
+            result from 14 to 18 rocks there even with every other floor; 20 kept 14. A point
+            cloud sets it from its spacing (``cloud.min_rock_spacings``); another tool's mesh,
+            when it is not set, has it lowered from here a factor sqrt 2 at a time while the
+            sizes pile up against it (``stockpile_ros.segment.pipeline.settle_floor``).
         ground_tolerance_edges: Height above the ground (``z = 0``, or the open ground found, see
             ``max_rock_b``) under which a face is ground [in median edge lengths; 2 is the 1 cm
             fitted on reconstructed piles at the 4-5 mm median edge of a depth-9 Poisson mesh of

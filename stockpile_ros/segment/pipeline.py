@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from ..artefacts import MeshInfo
 from ..result import (
+    FloorTry,
     GradationRecord,
     MeasureRecord,
     MeshRecord,
@@ -32,20 +33,24 @@ from .measure import (
     split_sheets,
     visibility_warnings,
 )
-from .params import SHARP_EDGES, RockScale, SegmentParams
+from .params import RESOLVABLE_EDGES, SHARP_EDGES, RockScale, SegmentParams
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
 __all__ = [
+    'FLOOR_STEPS',
     'TRUNCATED_MIN_ROCKS',
     'TRUNCATED_RATIO',
     'TWO_SIZES_MIN_ROCKS',
     'Analysis',
     'Measured',
     'analyse_mesh',
+    'floor_warnings',
     'grade',
+    'kept_floor',
     'principal_axes',
     'segment_and_measure',
+    'settle_floor',
     'truncation_warnings',
 ]
 
@@ -63,6 +68,12 @@ TRUNCATED_RATIO = 2.0
 #: gap, for ``truncation_warnings`` to read a gap between them as two kinds of rock (a band's
 #: count varies by about its square root from draw to draw, so a gap under ten says little).
 TWO_SIZES_MIN_ROCKS = 10
+
+#: Floors :func:`settle_floor` tries under ``SegmentParams.min_rock_edges``, each a band of
+#: ``truncation_warnings`` (a factor sqrt 2) under the last: from the default 20 edge lengths
+#: down to 7.1, about the floor a cloud is segmented at (``cloud.min_rock_spacings`` point
+#: spacings: 7.3 edge lengths on bench/bench_cloud.py's gravel bar).
+FLOOR_STEPS = 3
 
 
 @dataclass(frozen=True)
@@ -195,9 +206,7 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
     if scale.source != 'mesh' or b0 <= 0 or scale.edge <= 0:
         return []
     b = np.asarray(sizes, dtype=np.float64)
-    # Bands of a factor sqrt 2 from b0 up; the first also takes what measures under b0.
-    band = np.floor(2.0 * np.log2(np.maximum(b, b0) / b0)).astype(np.int64)
-    counts = np.bincount(band, minlength=1)
+    counts = _bands(b, b0)
     resolves = (
         f'{b0:.3g} {units}, the smallest rock this mesh resolves '
         f'({b0 / scale.edge:.0f} median edge lengths)'
@@ -232,6 +241,12 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
         f'(segment.min_rock_b: {between[1]:.3g} {units}, where the larger group begins, if the '
         'smaller are pieces of them; or a class to check).'
     ]
+
+
+def _bands(b: npt.NDArray[np.float64], b0: float) -> npt.NDArray[np.int64]:
+    """Count sizes in bands a factor sqrt 2 wide from ``b0`` up, the first with those under it."""
+    band = np.floor(2.0 * np.log2(np.maximum(b, b0) / b0)).astype(np.int64)
+    return np.bincount(band, minlength=1)
 
 
 def _size_gap(counts: npt.NDArray[np.int64]) -> tuple[int, int, int] | None:
@@ -344,6 +359,145 @@ def segment_and_measure(
     return Measured(seg, rocks, sheets)
 
 
+def settle_floor(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    seg_params: SegmentParams,
+    measure_params: MeasureParams,
+    spec: dict[str, Any] | None = None,
+) -> tuple[Measured, list[FloorTry]]:
+    """Segment and measure with the floor lowered to where the pile's smallest rocks are.
+
+    For a mesh nothing vouches for (another tool's, with no ``mesh.json``), the floor
+    ``min_rock_edges`` is a guess: fitted on meshes from photos, whose noise cuts rocks into
+    pieces up to about its size, it sets the smallest rock of a mesh that is clean at the scale
+    of its edges (a scanner cloud's Poisson mesh) far above the pile's smallest rocks, and the
+    sizes then pile up against it (``truncation_warnings``). Where nothing asks for a smallest
+    rock of interest and they do, the floor is lowered a band of that test (a factor sqrt 2) at
+    a time, ``FLOOR_STEPS`` times at most, until they fall off towards it. A pile holds more
+    rocks band after band towards its smallest (2.8 times more per band when spread evenly by
+    mass in log size), so a floor under them finds its lowest band fuller than the next; where
+    that band holds fewer, the rise ended above it, what it adds are pieces of rocks cut along
+    the mesh's noise, and the floor above is kept. Where the sizes pile up at every floor tried
+    (the pile holds rocks smaller still, or the noise cuts pieces of about each floor's size),
+    the first is kept.
+
+    Measured (README, 2026-12-08): bench/bench_cloud.py's gravel bar (rocks of b 0.1-0.4 m)
+    meshed at 11.5 mm and given as a mesh piles up at 20, 14.1 and 10 edge lengths and falls
+    off at 7.1 with 109 rocks in its lowest band and 82 in the next: recall 0.32 -> 0.95, D50
+    error +19.6 -> -0.0 %. bench/bench_yardstick.py's cobble bed with the noise of a mesh from
+    photos, its smallest rock 19 edge lengths across, piles up at 20 and falls off at 14.1 with
+    62 against 102 (precision 0.89 at 20, 0.80 at 14.1): 20 is kept. The reconstructed piles'
+    meshes from photos fall off at 20.
+
+    Returns:
+        What was measured at the floor kept, and each floor tried in order (none where a
+        smallest rock of interest is asked: the floor does not set it then).
+
+    """
+    runs: list[Measured] = []
+    tried: list[FloorTry] = []
+    for step in range(FLOOR_STEPS + 1):
+        edges = seg_params.min_rock_edges / np.sqrt(2.0) ** step
+        if edges < RESOLVABLE_EDGES:
+            break
+        measured = segment_and_measure(
+            vertices, faces, replace(seg_params, min_rock_edges=edges), measure_params, spec
+        )
+        scale = measured.segmentation.scale
+        if scale.source != 'mesh':
+            return measured, []
+        sizes = [r.b for r in measured.rocks]
+        bands = _bands(np.asarray(sizes, dtype=np.float64), scale.min_rock_b)
+        cut = bool(truncation_warnings(scale, sizes, ''))
+        runs.append(measured)
+        tried.append(FloorTry(float(edges), float(scale.min_rock_b), [int(n) for n in bands], cut))
+        if not cut:
+            break
+    keep = kept_floor(tried)
+    tried[keep] = replace(tried[keep], kept=True)
+    return runs[keep], tried
+
+
+def kept_floor(tried: Sequence[FloorTry]) -> int:
+    """Return which of the floors :func:`settle_floor` tried, highest first, it keeps.
+
+    The last, where the sizes fall off towards it and its lowest band is the fullest (or it is
+    the first); the one above it where that band holds fewer than the next; the first where the
+    sizes pile up against every floor tried.
+    """
+    last = tried[-1]
+    if last.cut:
+        return 0
+    if len(tried) == 1 or len(last.bands) < 2 or last.bands[0] >= last.bands[1]:
+        return len(tried) - 1
+    return len(tried) - 2
+
+
+def floor_warnings(scale: RockScale, tried: Sequence[FloorTry], units: str) -> list[str]:
+    """Say how :func:`settle_floor` set the smallest rock of a mesh nothing vouches for.
+
+    Args:
+        scale: The segmentation's scale, at the floor kept.
+        tried: The floors tried (:func:`settle_floor`).
+        units: The mesh's units, for the message.
+
+    Returns:
+        A warning where the floor was searched beyond the first, or where a smallest rock asked
+        for is under the floor; nothing where the sizes fell off at the first floor or a
+        smallest rock asked for is resolved.
+
+    """
+    if not tried:
+        if scale.requested >= scale.min_rock_b:
+            return []
+        return [
+            f'The mesh was taken to resolve rocks from {scale.min_rock_b / scale.edge:.3g} median '
+            f'edge lengths ({scale.min_rock_b:.3g} {units}; segment.min_rock_edges), the floor '
+            'fitted on meshes made from photos, whose noise cuts rocks into pieces up to about '
+            f'that size: the smallest rock asked for ({scale.requested:.3g} {units}) is under '
+            "it. A mesh clean at the scale of its edges, as a Poisson mesh of a scanner's cloud "
+            'is, resolves smaller rocks: give the cloud itself, or set segment.min_rock_edges '
+            'lower.'
+        ]
+    if len(tried) == 1:
+        return []
+    (kept,) = [t for t in tried if t.kept]
+    seen = '; '.join(
+        f'{t.edges:.3g}: {", ".join(str(n) for n in t.bands[:2])} of {sum(t.bands)}' for t in tried
+    )
+    head = (
+        'Floors tried for the smallest rock this mesh resolves (segment.min_rock_edges, median '
+        f'edge lengths: rocks in the two bands a factor 1.41 wide above it, of all): {seen}. '
+        f'Kept {kept.edges:.3g} ({kept.min_rock_b:.3g} {units}): '
+    )
+    first = tried[0].edges
+    if kept is tried[-1]:
+        why = (
+            'the sizes piled up against the higher floors and fall off towards this one, its '
+            "lowest band the fullest as a pile's smallest rocks make it. That reads the mesh "
+            "as clean at the scale of its edges, as a Poisson mesh of a scanner's cloud is; for "
+            'a mesh made from photos, whose noise cuts rocks into pieces, set '
+            f'segment.min_rock_edges={first:g}, or give the smallest rock that matters '
+            '(segment.min_rock_b).'
+        )
+    elif not tried[-1].cut:
+        why = (
+            'a band lower the sizes fall off, but that band holds fewer rocks than the next, '
+            "where a pile's count rises towards its smallest rocks: those are about this floor "
+            "and what a lower one adds are pieces of rocks cut along the mesh's noise. Rocks "
+            'under it, if the pile holds any, are not counted.'
+        )
+    else:
+        why = (
+            'the sizes piled up against every floor: the pile holds rocks smaller still, or the '
+            "mesh's noise cuts rocks into pieces of about each floor's size. Its gradation is "
+            'that of the rocks from about this size up. Give the smallest rock that matters '
+            "(segment.min_rock_b), or the cloud the mesh was made from if it is a scanner's."
+        )
+    return [head + why]
+
+
 def analyse_mesh(
     vertices: npt.ArrayLike,
     faces: npt.ArrayLike,
@@ -355,6 +509,7 @@ def analyse_mesh(
     mesh_info: MeshInfo | None = None,
     source: str = '',
     report_options: ReportOptions | None = None,
+    search_floor: bool = False,
 ) -> Analysis:
     """Segment a stockpile mesh, measure its rocks and grade the pile.
 
@@ -369,6 +524,8 @@ def analyse_mesh(
             model units.
         source: Where the mesh came from, recorded in the report.
         report_options: Intervals (resamples, confidence, seed) and the Rosin-Rammler fit.
+        search_floor: Lower the floor ``min_rock_edges`` while the sizes pile up against it
+            (:func:`settle_floor`): for a mesh nothing vouches for, another tool's.
 
     Returns:
         The analysis, report included.
@@ -383,9 +540,15 @@ def analyse_mesh(
     metric = info.scale.metric
     t0 = time.perf_counter()
     # A class's sizes are metres: in model units they would set a meaningless smallest rock.
-    measured = segment_and_measure(v, f, sp, mp, spec if metric else None)
+    checked = spec if metric else None
+    floors: list[FloorTry] = []
+    if search_floor:
+        measured, floors = settle_floor(v, f, sp, mp, checked)
+    else:
+        measured = segment_and_measure(v, f, sp, mp, checked)
     t1 = time.perf_counter()
     seg, rocks = measured.segmentation, measured.rocks
+    units = 'm' if metric else 'model units'
     orientation = principal_axes(v, seg, [r.id for r in rocks])
     identity = [0.0, 0.0, 0.0, 1.0]
     report = Report(
@@ -398,24 +561,23 @@ def analyse_mesh(
             rocks, spec, info.scale.rel_uncertainty, opts, metric, resolved_b=seg.scale.min_rock_b
         ),
         segmentation=SegmentationRecord(
-            **asdict(sp),
+            **asdict(seg.params),
             scale=seg.scale,
             raw_regions=seg.raw_regions,
             segments=int(seg.labels.max()) if len(seg.labels) else 0,
             rocks_measured=len(rocks),
             seconds=round(t1 - t0, 3),
             measure=MeasureRecord(**asdict(mp)),
+            floors=floors,
         ),
         mesh=MeshRecord(faces=len(f), vertices=len(v), source=source),
         warnings=_reconstruction_warnings(info)
         + _resolution_warnings(seg)
         + sheet_warnings(
-            measured.sheets,
-            mp,
-            'm' if metric else 'model units',
-            seg.params.ground_window_b * seg.scale.max_rock_b > 0,
+            measured.sheets, mp, units, seg.params.ground_window_b * seg.scale.max_rock_b > 0
         )
         + visibility_warnings(rocks)
-        + truncation_warnings(seg.scale, [r.b for r in rocks], 'm' if metric else 'model units'),
+        + truncation_warnings(seg.scale, [r.b for r in rocks], units)
+        + (floor_warnings(seg.scale, floors, units) if search_floor else []),
     )
     return Analysis(v, f, colors, seg, rocks, report)
