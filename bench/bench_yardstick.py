@@ -56,11 +56,12 @@ interest is F times the material's smallest b, so that the bed's smaller rocks a
 it, as a gravel bar's are under what its survey resolves: they are scored as the barely visible
 ones are (neither missed nor, found alone, counted either way; ``score_labels``' ``min_b``), the
 recall and ``D50 vis`` are over the rocks at or above it, and a line under the row counts the
-reported rocks made of several fines (false rocks). With ``--search-floor`` no smallest rock is
-given and the floor is searched as for another tool's mesh (``settle_floor``), ``floor`` giving
-the one kept in median edge lengths (``!`` where the sizes still pile up against it); with
-``--floor 0`` no smallest rock is given and the floor stays at ``segment.min_rock_edges``, which
-is what another tool's mesh had before the search. The beds and their meshed surfaces are
+reported rocks made of several fines (false rocks). With ``--search-floor`` the floor is searched
+as for another tool's mesh (``settle_floor``: where it is above the smallest rock asked for, or
+none is asked, ``--floor 0``), ``floor`` giving the one kept in median edge lengths (``!`` where
+the sizes still pile up against it); ``--floor 0`` alone keeps the floor at
+``segment.min_rock_edges`` with no smallest rock given, as another tool's mesh had it before the
+search. The beds and their meshed surfaces are
 kept under ``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings
 meshes each surface once.
 
@@ -276,7 +277,7 @@ def main() -> None:
     parser.add_argument(
         '--search-floor',
         action='store_true',
-        help="no smallest rock given: the floor searched as for another tool's mesh",
+        help="the floor searched as for another tool's mesh (no smallest rock given: --floor 0)",
     )
     parser.add_argument('--set', nargs='*', default=[], metavar='FIELD=VALUE')
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_yardstick'))
@@ -300,9 +301,8 @@ def main() -> None:
         cost = []
         for across in args.edges:
             surface = surveyed(placed, material, across, args)
-            smallest = 0.0 if args.search_floor else args.floor * lo
             params = SegmentParams.preset(
-                'default', **{'min_rock_b': smallest, 'max_rock_b': hi, **overrides}
+                'default', **{'min_rock_b': args.floor * lo, 'max_rock_b': hi, **overrides}
             )
             steps: list[tuple[str, np.ndarray]] = []
             t0 = time.process_time()

@@ -314,6 +314,8 @@ class FloorTry:
         bands: Rocks measured at it, by b in bands a factor sqrt 2 wide from ``min_rock_b`` up
             (the first with any under it).
         cut: Whether the sizes pile up against it (``truncation_warnings``).
+        asked: Whether it is at or under the smallest rock asked for (``min_rock_b``, a class),
+            which ``min_rock_b`` then is.
         kept: Whether it is the floor the result holds.
 
     """
@@ -322,6 +324,7 @@ class FloorTry:
     min_rock_b: float
     bands: list[int]
     cut: bool
+    asked: bool = False
     kept: bool = False
 
 

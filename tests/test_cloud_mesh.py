@@ -482,15 +482,16 @@ def test_another_tools_mesh_has_its_floor_searched_unless_something_vouches_for_
     (tried,) = report.segmentation.floors
     assert tried.edges == 20.0 and tried.kept and not tried.cut
     assert not any('segment.min_rock_edges' in w for w in report.warnings)
-    # Its floor set explicitly, a smallest rock given, or this project's own mesh (with its
-    # mesh.json): nothing searched; said only where the floor is above the smallest rock asked.
+    # Its floor set explicitly, a smallest rock asked at or above it, or this project's own mesh
+    # (with its mesh.json): nothing searched.
     for flags in (('--set', 'segment.min_rock_edges=20'), ('--set', 'segment.min_rock_b=0.4')):
         report = run('--units', 'm', *flags)
         assert report.segmentation.floors == []
         assert not any('segment.min_rock_edges' in w for w in report.warnings)
+    # A smallest rock asked under the floor: searched (the one rock falls off at the first).
     report = run('--units', 'm', '--set', 'segment.min_rock_b=0.05')
-    assert report.segmentation.floors == []
-    assert any('the smallest rock asked for (0.05 m) is under it' in w for w in report.warnings)
+    (tried,) = report.segmentation.floors
+    assert tried.kept and not tried.asked and tried.min_rock_b > 0.05
     info = tmp_path / 'mesh.json'
     save(MeshInfo(ScaleRecord('given', 1.0), units='m'), info)
     assert run('--mesh-info', str(info)).segmentation.floors == []

@@ -12,7 +12,7 @@ from stockpile_ros.cli import main
 from stockpile_ros.meshio import LabelledMesh, write_labelled_mesh
 from stockpile_ros.result import FloorTry, Report
 from stockpile_ros.segment.measure import MeasureParams
-from stockpile_ros.segment.params import SegmentParams, rock_scale
+from stockpile_ros.segment.params import SegmentParams
 from stockpile_ros.segment.pipeline import (
     FLOOR_STEPS,
     Measured,
@@ -59,10 +59,15 @@ def test_a_clean_mesh_finer_than_the_floor_has_it_lowered_towards_its_smallest_r
     lowered = _score(surface, measured)
     default = _score(surface, segment_and_measure(v, f, SegmentParams(), MeasureParams()))
     assert lowered.recall >= max(0.5, 3 * default.recall) and lowered.precision >= 0.7
-    # A smallest rock asked for is not searched.
+    # A smallest rock asked for at or above the floor: nothing searched.
     asked = SegmentParams(min_rock_b=0.3)
     again, none = settle_floor(v, f, asked, MeasureParams())
     assert none == [] and again.segmentation.params == asked
+    # Under it (0.12 m, the floor at 20 edges being 0.25 m): searched, never under what is asked.
+    again, tried = settle_floor(v, f, SegmentParams(min_rock_b=0.12), MeasureParams())
+    assert len(tried) > 1 and min(t.min_rock_b for t in tried) == pytest.approx(0.12, rel=1e-6)
+    assert [t.asked for t in tried] == [t.min_rock_b <= 0.12 * (1 + 1e-6) for t in tried]
+    assert again.segmentation.scale.min_rock_b >= 0.12 * (1 - 1e-6)
 
 
 def test_the_floor_kept_is_where_the_sizes_fall_off_with_the_rise_below_it() -> None:
@@ -78,35 +83,33 @@ def test_the_floor_kept_is_where_the_sizes_fall_off_with_the_rise_below_it() -> 
     # (a bed with the noise of a mesh from photos, its smallest rock at 19 edge lengths).
     assert kept_floor([t(20, 114, 36, 15, cut=True), t(14, 62, 102, 36, cut=False)]) == 0
     assert kept_floor([*bar[:2], t(10, 61, 87, 23, cut=False)]) == 1
-    # Piled up at every floor: the first.
+    # Piled up at every floor: the first; unless the last is the smallest rock asked for.
     assert kept_floor([*bar, t(7, 200, 82, cut=True)]) == 0
+    asked = FloorTry(8.7, 0.1, [129, 54], True, asked=True)
+    assert kept_floor([*bar, asked]) == 3
 
 
 def test_how_the_floor_was_set_is_said() -> None:
-    scale = rock_scale(SegmentParams(min_rock_edges=7.07), 0.0115)
-
     def t(edges: float, *bands: int, cut: bool, kept: bool = False) -> FloorTry:
-        return FloorTry(edges, edges * 0.0115, list(bands), cut, kept)
+        return FloorTry(edges, edges * 0.0115, list(bands), cut, kept=kept)
 
     bar = [t(20, 69, 2, cut=True), t(14.1, 99, 13, cut=True), t(10, 137, 34, cut=True)]
-    (text,) = floor_warnings(scale, [*bar, t(7.07, 109, 82, 33, cut=False, kept=True)], 'm')
+    (text,) = floor_warnings([*bar, t(7.07, 109, 82, 33, cut=False, kept=True)], 'm')
     assert '20: 69, 2 of 71; 14.1: 99, 13 of 112; 10: 137, 34 of 171; 7.07: 109, 82 of 224' in text
-    assert 'Kept 7.07 (0.0813 m)' in text and 'segment.min_rock_edges=20' in text
+    assert 'Kept 7.07 (0.0813 m)' in text and 'fall off towards this one' in text
+    assert 'segment.min_rock_edges=20' in text
+    asked = FloorTry(8.7, 0.1, [129, 54], True, asked=True, kept=True)
+    (text,) = floor_warnings([*bar, asked], 'm')
+    assert 'Kept 8.7 (0.1 m)' in text and 'it is the smallest rock asked for' in text
     (text,) = floor_warnings(
-        scale, [t(20, 114, 36, cut=True, kept=True), t(14.1, 62, 102, cut=False)], 'm'
+        [t(20, 114, 36, cut=True, kept=True), t(14.1, 62, 102, cut=False)], 'm'
     )
     assert 'Kept 20 ' in text and 'pieces of rocks' in text
-    (text,) = floor_warnings(
-        scale, [t(20, 69, 2, cut=True, kept=True), t(14.1, 99, 13, cut=True)], 'm'
-    )
-    assert 'piled up against every floor' in text
-    # Fell off at the first floor: nothing to say.
-    assert floor_warnings(scale, [t(20, 3, 5, cut=False, kept=True)], 'm') == []
-    # Not searched (a smallest rock asked for): said only where the floor is above it.
-    asked = rock_scale(SegmentParams(min_rock_b=0.05), 0.0115)
-    (text,) = floor_warnings(asked, [], 'm')
-    assert 'the smallest rock asked for (0.05 m) is under it' in text
-    assert floor_warnings(rock_scale(SegmentParams(min_rock_b=0.5), 0.0115), [], 'm') == []
+    (text,) = floor_warnings([t(20, 69, 2, cut=True, kept=True), t(14.1, 99, 13, cut=True)], 'm')
+    assert 'piled up against every floor' in text and 'Kept 20 (0.23 m)' in text
+    # Fell off at the first floor, or not searched: nothing to say.
+    assert floor_warnings([t(20, 3, 5, cut=False, kept=True)], 'm') == []
+    assert floor_warnings([], 'm') == []
 
 
 def test_stockpile_segment_searches_the_floor_of_another_tools_mesh(tmp_path) -> None:  # type: ignore[no-untyped-def]

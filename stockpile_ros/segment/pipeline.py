@@ -33,7 +33,14 @@ from .measure import (
     split_sheets,
     visibility_warnings,
 )
-from .params import RESOLVABLE_EDGES, SHARP_EDGES, RockScale, SegmentParams
+from .params import (
+    RESOLVABLE_EDGES,
+    SHARP_EDGES,
+    RockScale,
+    SegmentParams,
+    median_edge,
+    rock_scale,
+)
 from .qa import ReportOptions, bootstrap_intervals, decide, refuse, rosin_rammler, sieve_table
 from .segmentation import Segmentation, segment_mesh
 
@@ -372,9 +379,10 @@ def settle_floor(
     ``min_rock_edges`` is a guess: fitted on meshes from photos, whose noise cuts rocks into
     pieces up to about its size, it sets the smallest rock of a mesh that is clean at the scale
     of its edges (a scanner cloud's Poisson mesh) far above the pile's smallest rocks, and the
-    sizes then pile up against it (``truncation_warnings``). Where nothing asks for a smallest
-    rock of interest and they do, the floor is lowered a band of that test (a factor sqrt 2) at
-    a time, ``FLOOR_STEPS`` times at most, until they fall off towards it. A pile holds more
+    sizes then pile up against it (``truncation_warnings``). Where the floor sets the smallest
+    rock of interest (none is asked for, or one under the floor) and they do, it is lowered a
+    band of that test (a factor sqrt 2) at a time, ``FLOOR_STEPS`` times at most and never under
+    the rock asked for, until they fall off towards it. A pile holds more
     rocks band after band towards its smallest (2.8 times more per band when spread evenly by
     mass in log size), so a floor under them finds its lowest band fuller than the next; where
     that band holds fewer, the rise ended above it, what it adds are pieces of rocks cut along
@@ -391,27 +399,33 @@ def settle_floor(
     meshes from photos fall off at 20.
 
     Returns:
-        What was measured at the floor kept, and each floor tried in order (none where a
-        smallest rock of interest is asked: the floor does not set it then).
+        What was measured at the floor kept, and each floor tried in order (none where the
+        smallest rock asked for is at or above the floor: the floor does not set it then).
 
     """
+    edge = median_edge(vertices, faces)
+    first = rock_scale(seg_params, edge, spec)
+    if (first.source != 'mesh' and first.requested >= first.min_rock_b) or edge <= 0:
+        return segment_and_measure(vertices, faces, seg_params, measure_params, spec), []
+    # Under the smallest rock asked for, the floor no longer sets anything: the last floor tried.
+    asked = 0.0 if first.source == 'mesh' else first.requested / edge
+    steps = seg_params.min_rock_edges / np.sqrt(2.0) ** np.arange(FLOOR_STEPS + 1)
+    floors = np.unique(np.maximum(steps[steps >= RESOLVABLE_EDGES], asked))[::-1]
     runs: list[Measured] = []
     tried: list[FloorTry] = []
-    for step in range(FLOOR_STEPS + 1):
-        edges = seg_params.min_rock_edges / np.sqrt(2.0) ** step
-        if edges < RESOLVABLE_EDGES:
-            break
+    for edges in floors:
         measured = segment_and_measure(
-            vertices, faces, replace(seg_params, min_rock_edges=edges), measure_params, spec
+            vertices, faces, replace(seg_params, min_rock_edges=float(edges)), measure_params, spec
         )
         scale = measured.segmentation.scale
-        if scale.source != 'mesh':
-            return measured, []
         sizes = [r.b for r in measured.rocks]
         bands = _bands(np.asarray(sizes, dtype=np.float64), scale.min_rock_b)
-        cut = bool(truncation_warnings(scale, sizes, ''))
+        # Whether they pile up against it, whether the floor or a smallest rock asked set it.
+        cut = bool(truncation_warnings(replace(scale, source='mesh'), sizes, ''))
         runs.append(measured)
-        tried.append(FloorTry(float(edges), float(scale.min_rock_b), [int(n) for n in bands], cut))
+        at_asked = scale.source != 'mesh' and scale.min_rock_b <= scale.requested
+        b0 = float(scale.min_rock_b)
+        tried.append(FloorTry(float(edges), b0, [int(n) for n in bands], cut, asked=at_asked))
         if not cut:
             break
     keep = kept_floor(tried)
@@ -423,44 +437,31 @@ def kept_floor(tried: Sequence[FloorTry]) -> int:
     """Return which of the floors :func:`settle_floor` tried, highest first, it keeps.
 
     The last, where the sizes fall off towards it and its lowest band is the fullest (or it is
-    the first); the one above it where that band holds fewer than the next; the first where the
-    sizes pile up against every floor tried.
+    the first), or where it is the smallest rock asked for and they pile up against it (the
+    pile holds smaller rocks, not counted as asked); the one above it where that band holds
+    fewer than the next; the first where the sizes pile up against every floor tried.
     """
     last = tried[-1]
     if last.cut:
-        return 0
+        return len(tried) - 1 if last.asked else 0
     if len(tried) == 1 or len(last.bands) < 2 or last.bands[0] >= last.bands[1]:
         return len(tried) - 1
     return len(tried) - 2
 
 
-def floor_warnings(scale: RockScale, tried: Sequence[FloorTry], units: str) -> list[str]:
+def floor_warnings(tried: Sequence[FloorTry], units: str) -> list[str]:
     """Say how :func:`settle_floor` set the smallest rock of a mesh nothing vouches for.
 
     Args:
-        scale: The segmentation's scale, at the floor kept.
         tried: The floors tried (:func:`settle_floor`).
         units: The mesh's units, for the message.
 
     Returns:
-        A warning where the floor was searched beyond the first, or where a smallest rock asked
-        for is under the floor; nothing where the sizes fell off at the first floor or a
-        smallest rock asked for is resolved.
+        A warning where floors under the first were tried; nothing where none was searched or
+        the sizes fell off towards the first.
 
     """
-    if not tried:
-        if scale.requested >= scale.min_rock_b:
-            return []
-        return [
-            f'The mesh was taken to resolve rocks from {scale.min_rock_b / scale.edge:.3g} median '
-            f'edge lengths ({scale.min_rock_b:.3g} {units}; segment.min_rock_edges), the floor '
-            'fitted on meshes made from photos, whose noise cuts rocks into pieces up to about '
-            f'that size: the smallest rock asked for ({scale.requested:.3g} {units}) is under '
-            "it. A mesh clean at the scale of its edges, as a Poisson mesh of a scanner's cloud "
-            'is, resolves smaller rocks: give the cloud itself, or set segment.min_rock_edges '
-            'lower.'
-        ]
-    if len(tried) == 1:
+    if len(tried) <= 1:
         return []
     (kept,) = [t for t in tried if t.kept]
     seen = '; '.join(
@@ -473,13 +474,17 @@ def floor_warnings(scale: RockScale, tried: Sequence[FloorTry], units: str) -> l
     )
     first = tried[0].edges
     if kept is tried[-1]:
+        reached = (
+            'it is the smallest rock asked for'
+            if kept.asked
+            else "they fall off towards this one, its lowest band the fullest as a pile's "
+            'smallest rocks make it'
+        )
         why = (
-            'the sizes piled up against the higher floors and fall off towards this one, its '
-            "lowest band the fullest as a pile's smallest rocks make it. That reads the mesh "
-            "as clean at the scale of its edges, as a Poisson mesh of a scanner's cloud is; for "
-            'a mesh made from photos, whose noise cuts rocks into pieces, set '
-            f'segment.min_rock_edges={first:g}, or give the smallest rock that matters '
-            '(segment.min_rock_b).'
+            f'the sizes piled up against the higher floors and {reached}. That reads the mesh as '
+            "clean at the scale of its edges, as a Poisson mesh of a scanner's cloud is; for a "
+            'mesh made from photos, whose noise cuts rocks into pieces, set '
+            f'segment.min_rock_edges={first:g}.'
         )
     elif not tried[-1].cut:
         why = (
@@ -578,6 +583,6 @@ def analyse_mesh(
         )
         + visibility_warnings(rocks)
         + truncation_warnings(seg.scale, [r.b for r in rocks], units)
-        + (floor_warnings(seg.scale, floors, units) if search_floor else []),
+        + floor_warnings(floors, units),
     )
     return Analysis(v, f, colors, seg, rocks, report)
