@@ -37,6 +37,7 @@ from .meshio import (
 )
 
 __all__ = [
+    'BROKEN_SHARE',
     'PLAUSIBLE_EDGE_M',
     'PLAUSIBLE_EXTENT_M',
     'UNITS',
@@ -76,6 +77,16 @@ This is a check of the units, not a rule of measurement, so it is stated in metr
 PLAUSIBLE_EDGE_M = (1e-5, 1.0)
 """Median edge length of a stockpile mesh [m]: finer than 10 µm or coarser than a metre is a mesh
 in other units (a metre-edged mesh still resolves a boulder of a few metres)."""
+
+BROKEN_SHARE = 0.25
+"""Share of a mesh's faces of zero area over three distinct vertices from which it is refused as
+no surface (faces that repeat a vertex index are records to drop, however many). A mesher leaves
+a few (slivers where its surface meets itself: none on this project's meshes); a quarter or more
+is a surface whose vertices fell onto each other, as a tool computing in single precision far
+from the origin leaves them: open3d's Poisson of bench/bench_cloud.py's gravel bar in
+coordinates 5e5 m east and 5e6 m north gave 272k of 346k faces of zero area, its vertices on
+steps of 3.1 cm, and the bar (229 rocks of D50 0.19 m from the cloud) read as 7 rocks of D50
+0.61 m."""
 
 # A face is of zero area when its height is within float64 rounding of nothing, relative to its
 # longest edge: scale-free, so the same faces are dropped whatever the units.
@@ -210,7 +221,7 @@ def check_mesh(
 
     Raises:
         MeshError: Unknown units, a mesh :func:`~stockpile_ros.meshio.check_arrays` refuses, or
-            no face left after the drops.
+            ``BROKEN_SHARE`` of its faces or more of zero area over three vertices.
 
     """
     if units not in UNITS:
@@ -231,7 +242,20 @@ def check_mesh(
     duplicates = len(kept) - len(unique)
     if len(unique) == 0:
         raise MeshError(
-            f'{source}: all {len(faces)} faces are degenerate (repeated vertex or zero area)'
+            f'{source}: all {len(faces)} faces are degenerate (repeated vertex or zero '
+            f'area){_single_precision(vertices, faces)}'
+        )
+    # Faces that repeat a vertex index are records to drop; zero area over three vertices is
+    # geometry that collapsed.
+    distinct = (
+        (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    )
+    collapsed = int(np.count_nonzero(degenerate & distinct))
+    if collapsed >= BROKEN_SHARE * len(faces):
+        raise MeshError(
+            f'{source}: {collapsed} of {len(faces)} faces have zero area over three vertices, '
+            f'which fell onto each other: not a surface to measure'
+            f'{_single_precision(vertices, faces)}'
         )
     faces, labels = faces[unique], np.asarray(mesh.labels)[unique]
     used = vertices[np.unique(faces)]
@@ -272,6 +296,29 @@ def check_mesh(
         )
     colors = mesh.colors
     return LabelledMesh(vertices, faces, labels.astype(np.int32), colors), check
+
+
+def _single_precision(vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64]) -> str:
+    """Say so where the vertices are single-precision numbers too large for the mesh's detail.
+
+    Single precision holds 24 bits: at 5e5 m its steps are 3.1 cm. Named where every coordinate
+    is a single-precision number and the step at the largest is over a millionth of the extent
+    (a double-precision tool's coordinates are not all single-precision numbers).
+    """
+    used = vertices[np.unique(faces)]
+    if not np.array_equal(used.astype(np.float32).astype(np.float64), used):
+        return ''
+    big = float(np.abs(used).max())
+    step = float(np.spacing(np.float32(big)))
+    extent = float(np.max(used.max(axis=0) - used.min(axis=0)))
+    if step <= 1e-6 * extent:
+        return ''
+    return (
+        f'; its coordinates are single-precision numbers as large as {big:.4g}, on steps of '
+        f'{step:.3g} there: the tool that made it computed far from the origin (geographic '
+        "coordinates). Subtract the cloud's smallest coordinates before meshing it, or give the "
+        'cloud itself'
+    )
 
 
 def _read_with_open3d(path: Path) -> LabelledMesh:

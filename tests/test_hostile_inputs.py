@@ -342,6 +342,32 @@ def test_tripled_and_degenerate_faces_are_dropped_counted_and_give_the_clean_res
     assert len(tripled.rocks) == len(clean.rocks) > 0
 
 
+def test_a_mesh_whose_vertices_collapsed_onto_each_other_is_refused_with_the_cause(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import open3d as o3d
+
+    v, f = _two_boulders()
+    _, _, clean = _segment(capsys, _ply(tmp_path / 'clean.ply', v, f), tmp_path / 'c')
+    # Geographic coordinates (5e5 m east, 5e6 m north) in single precision, as a tool computing
+    # so leaves them: steps of 3.1 cm and 0.5 m against the grid's 8.4 mm.
+    far = v + np.array([5e5, 5e6, 300.0])
+    path = _ply(tmp_path / 'single.ply', far.astype(np.float32), f)
+    code, _, err, _ = _run(
+        capsys, ['segment', str(path), '--units', 'm', '--out', str(tmp_path / 's')]
+    )
+    assert code != 0 and not (tmp_path / 's').exists()
+    assert 'faces have zero area over three vertices, which fell onto each other' in err
+    assert 'single-precision numbers as large as 5e+06, on steps of 0.5 there' in err
+    # The same coordinates in double precision: measured as the mesh near the origin is.
+    double = tmp_path / 'double.ply'
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(far), o3d.utility.Vector3iVector(f))
+    assert o3d.io.write_triangle_mesh(str(double), mesh)
+    _, err, kept = _segment(capsys, double, tmp_path / 'd', '--units', 'm')
+    assert 'degenerate' not in err
+    assert len(kept.rocks) == len(clean.rocks) > 0
+
+
 def test_a_mesh_stored_face_by_face_is_joined_and_gives_the_clean_result(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

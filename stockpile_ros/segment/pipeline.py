@@ -382,13 +382,13 @@ def settle_floor(
     sizes then pile up against it (``truncation_warnings``). Where the floor sets the smallest
     rock of interest (none is asked for, or one under the floor) and they do, it is lowered a
     band of that test (a factor sqrt 2) at a time, ``FLOOR_STEPS`` times at most and never under
-    the rock asked for, until they fall off towards it. A pile holds more
-    rocks band after band towards its smallest (2.8 times more per band when spread evenly by
-    mass in log size), so a floor under them finds its lowest band fuller than the next; where
-    that band holds fewer, the rise ended above it, what it adds are pieces of rocks cut along
-    the mesh's noise, and the floor above is kept. Where the sizes pile up at every floor tried
-    (the pile holds rocks smaller still, or the noise cuts pieces of about each floor's size),
-    the first is kept.
+    the rock asked for, until they fall off towards it. A pile holds more rocks band after band
+    towards its smallest (2.8 times more per band when spread evenly by mass in log size), so a
+    floor under them finds its lowest band fuller than the next; where that band holds fewer,
+    the rise ended above it, what it adds are pieces of rocks cut along the mesh's noise, and
+    the floor above is kept. Where the sizes pile up at every floor tried (the pile holds rocks
+    smaller still, or the noise cuts pieces of about each floor's size), the first is kept,
+    unless the last is the smallest rock asked for (see :func:`kept_floor`).
 
     Measured (README, 2026-12-08): bench/bench_cloud.py's gravel bar (rocks of b 0.1-0.4 m)
     meshed at 11.5 mm and given as a mesh piles up at 20, 14.1 and 10 edge lengths and falls
