@@ -25,11 +25,19 @@ returns a range between the rock and what lies behind it (mixed pixels); with ``
 ``--noise-growth 2`` the range noise grows as the range squared from the nearest point's 2 mm.
 ``--formats ply`` runs one file of the three (a dense cloud takes minutes each).
 
+With ``--meshes`` the same survey also goes in as two other tools' meshes, each through
+``stockpile segment MESH --units m`` (the floor searched, ``settle_floor``) and scored through the
+frame the run recorded: ``mesh:ours``, the PLY run's own Poisson mesh written back into the
+cloud's frame (a mesh as clean as the cloud route makes; needs ``ply`` among ``--formats``), and
+``mesh:user``, the survey moved to the origin and meshed as #16's user did (open3d's normals from
+the 30 nearest within 5 spacings turned to +z, Poisson at depth 9, untrimmed). Their ``floor``
+is the one kept.
+
 Usage:
     .venv/bin/python bench/bench_cloud.py [--rocks N] [--spacing M] [--gradation LO:HI]
         [--bed] [--rounding R] [--falloff P] [--aspect A] [--flat F] [--no-overhead]
         [--footprint W] [--registration M] [--noise-growth P]
-        [--formats ply xyz laz] [--cache DIR] [--set NAME=VALUE ...]
+        [--formats ply xyz laz] [--meshes] [--cache DIR] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -44,14 +52,19 @@ import contextlib  # noqa: E402
 import pickle  # noqa: E402
 import shutil  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import laspy  # noqa: E402
 import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 
+from stockpile_ros.artefacts import MeshInfo, load  # noqa: E402
 from stockpile_ros.cli import main  # noqa: E402
 from stockpile_ros.cloud import mesh_cloud, read_cloud  # noqa: E402
+from stockpile_ros.meshio import read_labelled_mesh  # noqa: E402
+from stockpile_ros.result import Report  # noqa: E402
 from stockpile_ros.settings import build_settings, get_setting, smallest_rock_asked  # noqa: E402
 from stockpile_ros.tools.sim.bed import BedConfig  # noqa: E402
 from stockpile_ros.tools.sim.pile import PileConfig, parse_gradation  # noqa: E402
@@ -125,6 +138,8 @@ def run() -> None:
     parser.add_argument('--formats', nargs='+', default=['ply', 'xyz', 'laz'],
                         choices=['ply', 'xyz', 'laz'],
                         help='files to run (a dense cloud: one)')  # fmt: skip
+    parser.add_argument('--meshes', action='store_true',
+                        help="also as other tools' meshes: the PLY run's, a user's")  # fmt: skip
     parser.add_argument('--cache', type=Path, default=Path('/tmp/stockpile_bench_cloud'))
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                         help="passed to stockpile segment's --set")  # fmt: skip
@@ -173,19 +188,62 @@ def run() -> None:
         mesh_cloud(cloud, settings.cloud, settings.recon.poisson, 1.0, 'given',
                    min_rock_b=smallest_rock_asked(settings))  # fmt: skip
         meshing = time.perf_counter() - t1
-        scores = score_survey(out, folder / 'truth', s)
-        d = scores['detection']
-        b = scores['sizes']['summary_visible']['b']['median_abs_pct']
-        d50 = 100.0 * scores['gradation']['d50_error']
-        size = path.stat().st_size / 1e6
-        found = f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f} {d50:+9.1f}'
-        it = d['of_interest']
-        found += f' {it["min_b_m"]:8.3f} ' + ' '.join(
-            '-'.rjust(w) if x is None else f'{x:{w}.2f}'
-            for x, w in ((it['recall'], 7), (it['precision'], 9))
-        )
-        print(f'{path.name:<12} {size:6.1f} {total:12.1f} {meshing:12.1f} {d["result_rocks"]:6d} '
-              f'{found}')  # fmt: skip
+        row(path.name, path, total, f'{meshing:12.1f}', score_survey(out, folder / 'truth', s))
+    if args.meshes:
+        for name, path, shift in other_meshes(s, folder, args.spacing):
+            out = path.with_name(f'result_{path.stem}')
+            shutil.rmtree(out, ignore_errors=True)
+            t0 = time.perf_counter()
+            assert main(['segment', str(path), '--units', 'm', '--out', str(out), *overrides]) == 0
+            total = time.perf_counter() - t0
+            record = load(Report, out / 'report.json').mesh.model_to_stockpile
+            assert record is not None
+            # From the cloud's frame: x_mesh = x_cloud - shift.
+            rotation = np.asarray(record.rotation).reshape(3, 3)
+            moved = [float(x) for x in record.translation - record.scale * rotation @ shift]
+            info = MeshInfo(model_to_stockpile=replace(record, translation=moved))
+            row(name, path, total, f'{"-":>12}', score_survey(out, folder / 'truth', s, info))
+
+
+def row(name: str, path: Path, total: float, meshing: str, scores: dict[str, Any]) -> None:
+    """Print one file's row of the table."""
+    d = scores['detection']
+    b = scores['sizes']['summary_visible']['b']['median_abs_pct']
+    d50 = 100.0 * scores['gradation']['d50_error']
+    size = path.stat().st_size / 1e6
+    found = f'{d["recall_visible"]:7.2f} {d["precision_visible"]:9.2f} {b:9.1f} {d50:+9.1f}'
+    it = d['of_interest']
+    found += f' {it["min_b_m"]:8.3f} ' + ' '.join(
+        '-'.rjust(w) if x is None else f'{x:{w}.2f}'
+        for x, w in ((it['recall'], 7), (it['precision'], 9))
+    )
+    print(f'{name:<12} {size:6.1f} {total:12.1f} {meshing} {d["result_rocks"]:6d} {found}')
+
+
+def other_meshes(s: Survey, folder: Path, spacing: float) -> list[tuple[str, Path, np.ndarray]]:
+    """Write the survey as other tools' meshes: name, file and its shift from the cloud's frame."""
+    made = []
+    ours = folder / 'result_ply'
+    if (ours / 'report.json').exists():
+        record = load(Report, ours / 'report.json').mesh.model_to_stockpile
+        assert record is not None
+        mesh = read_labelled_mesh(ours / 'segments.ply')
+        rotation = np.asarray(record.rotation).reshape(3, 3)
+        back = ((mesh.vertices - record.translation) @ rotation) / record.scale
+        path = folder / 'mesh_ours.ply'
+        # Double precision: the cloud's frame is georeferenced, far from the origin.
+        o3d.io.write_triangle_mesh(str(path), o3d.geometry.TriangleMesh(
+            o3d.utility.Vector3dVector(back), o3d.utility.Vector3iVector(mesh.faces)))  # fmt: skip
+        made.append(('mesh:ours', path, np.zeros(3)))
+    shift = np.floor(s.points.min(axis=0))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(s.points - shift))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=5 * spacing, max_nn=30))
+    cloud.orient_normals_to_align_with_direction([0.0, 0.0, 1.0])
+    user, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(cloud, depth=9)
+    path = folder / 'mesh_user.ply'
+    o3d.io.write_triangle_mesh(str(path), user)
+    made.append(('mesh:user', path, shift))
+    return made
 
 
 if __name__ == '__main__':
