@@ -59,11 +59,11 @@ recall and ``D50 vis`` are over the rocks at or above it, and a line under the r
 reported rocks made of several fines (false rocks). With ``--search-floor`` the floor is searched
 as for another tool's mesh (``settle_floor``: where it is above the smallest rock asked for, or
 none is asked, ``--floor 0``), ``floor`` giving the one kept in median edge lengths (``!`` where
-the sizes still pile up against it); ``--floor 0`` alone keeps the floor at
-``segment.min_rock_edges`` with no smallest rock given, as another tool's mesh had it before the
-search. The beds and their meshed surfaces are
-kept under ``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings
-meshes each surface once.
+the sizes still pile up against it; ``seconds`` then counts every floor tried); ``--floor 0``
+alone keeps the floor at ``segment.min_rock_edges`` with no smallest rock given, as another
+tool's mesh had it before the search. The beds and their meshed surfaces are kept under
+``--cache`` (a 30-edge surface is about 100 MB), so a sweep of segmentation settings meshes each
+surface once.
 
 Usage:
     .venv/bin/python bench/bench_yardstick.py [--rocks 300] [--edges 4 8 12 20 30]

@@ -310,7 +310,8 @@ class FloorTry:
 
     Attributes:
         edges: The floor [median edge lengths] (``SegmentParams.min_rock_edges``).
-        min_rock_b: The same in the mesh's units.
+        min_rock_b: The smallest rock of interest at it, in the mesh's units: the floor, or the
+            rock asked for where ``asked``.
         bands: Rocks measured at it, by b in bands a factor sqrt 2 wide from ``min_rock_b`` up
             (the first with any under it).
         cut: Whether the sizes pile up against it (``truncation_warnings``).
