@@ -219,7 +219,7 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
         f'({b0 / scale.edge:.0f} median edge lengths)'
     )
     low, other = int(counts[0]), int(counts[1:].max(initial=0))
-    if low >= TRUNCATED_MIN_ROCKS and low >= TRUNCATED_RATIO * other:
+    if _piled_up(counts):
         return [
             f'{low} of {len(b)} rocks measure b under {np.sqrt(2.0) * b0:.3g} {units}, against at '
             f'most {other} in any other band of sizes a factor 1.41 wide: '
@@ -248,6 +248,12 @@ def truncation_warnings(scale: RockScale, sizes: Sequence[float], units: str) ->
         f'(segment.min_rock_b: {between[1]:.3g} {units}, where the larger group begins, if the '
         'smaller are pieces of them; or a class to check).'
     ]
+
+
+def _piled_up(counts: npt.NDArray[np.int64]) -> bool:
+    """Whether the band just above the floor holds the most rocks by far (see the warning)."""
+    low = int(counts[0])
+    return low >= TRUNCATED_MIN_ROCKS and low >= TRUNCATED_RATIO * int(counts[1:].max(initial=0))
 
 
 def _bands(b: npt.NDArray[np.float64], b0: float) -> npt.NDArray[np.int64]:
@@ -418,10 +424,9 @@ def settle_floor(
             vertices, faces, replace(seg_params, min_rock_edges=float(edges)), measure_params, spec
         )
         scale = measured.segmentation.scale
-        sizes = [r.b for r in measured.rocks]
-        bands = _bands(np.asarray(sizes, dtype=np.float64), scale.min_rock_b)
+        bands = _bands(np.array([r.b for r in measured.rocks]), scale.min_rock_b)
         # Whether they pile up against it, whether the floor or a smallest rock asked set it.
-        cut = bool(truncation_warnings(replace(scale, source='mesh'), sizes, ''))
+        cut = _piled_up(bands) or _size_gap(bands) is not None
         runs.append(measured)
         at_asked = scale.source != 'mesh' and scale.min_rock_b <= scale.requested
         b0 = float(scale.min_rock_b)
